@@ -1,0 +1,56 @@
+# sb3-es developer tasks. `make train` and `make test` each set up .venv first.
+PY ?= python3
+VENV := .venv
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.stamp
+LINT_PATHS := $(wildcard sb3_es tests benchmarks examples)
+
+.DEFAULT_GOAL := help
+.PHONY: help venv train test lint typecheck docs bench clean
+
+help:
+	@echo "make train      set up .venv and run a short ARS training (TensorBoard logs + saved model)"
+	@echo "make test       set up .venv, run lint, type checks, docs build and the test suite"
+	@echo "make lint       ruff check + ruff format --check"
+	@echo "make typecheck  mypy"
+	@echo "make docs       build the Sphinx docs into docs/_build/html"
+	@echo "make bench      run benchmarks/run_all.py"
+	@echo "make clean      remove build outputs and caches (keeps .venv)"
+
+venv: $(STAMP)
+
+$(STAMP): pyproject.toml constraints.txt
+	@test -x $(BIN)/python || $(PY) -m venv $(VENV)
+	$(BIN)/python -m pip install --upgrade pip
+	$(BIN)/python -m pip install -c constraints.txt -e ".[dev]"
+	@touch $(STAMP)
+
+train: venv
+	$(BIN)/python -m sb3_es.cli quickstart
+
+test: venv
+	$(MAKE) lint
+	$(MAKE) typecheck
+	$(MAKE) docs
+	$(BIN)/python -m pytest -q
+
+lint: venv
+	$(BIN)/ruff check $(LINT_PATHS)
+	$(BIN)/ruff format --check $(LINT_PATHS)
+
+typecheck: venv
+	$(BIN)/mypy
+
+docs: venv
+	$(BIN)/sphinx-build -W --keep-going -b html docs docs/_build/html
+
+bench: venv
+	@if [ -f benchmarks/run_all.py ]; then \
+		$(BIN)/python benchmarks/run_all.py; \
+	else \
+		echo "benchmarks/run_all.py does not exist yet"; \
+	fi
+
+clean:
+	rm -rf docs/_build build dist *.egg-info .pytest_cache .mypy_cache .ruff_cache
+	find . -path ./$(VENV) -prune -o -type d -name __pycache__ -exec rm -rf {} +

@@ -1,0 +1,119 @@
+"""Augmented Random Search (Mania, Guy and Recht, 2018) as an SB3 algorithm."""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar, TypeVar
+
+import numpy as np
+import torch as th
+from stable_baselines3.common.policies import BasePolicy
+from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
+from stable_baselines3.common.utils import FloatSchedule
+
+from sb3_es.ars.policies import FlatPolicy, LinearPolicy, MlpPolicy
+from sb3_es.common.population_algorithm import PopulationAlgorithm, check_positive
+from sb3_es.strategies import ARSStrategy
+
+SelfARS = TypeVar("SelfARS", bound="ARS")
+
+
+class ARS(PopulationAlgorithm):
+    """
+    Augmented Random Search: https://arxiv.org/abs/1803.07055
+
+    Hyperparameters have the names and meanings of sb3-contrib's ARS, so rl-baselines3-zoo's
+    ``ars.yml`` entries run unchanged. The paper's variants: V1 is ``policy_kwargs=dict(
+    normalize_observations=False)``, V2 (the default) normalizes observations inside the policy, and
+    the ``-t`` variants use ``n_top < n_delta``.
+
+    :param policy: ``"LinearPolicy"``, ``"MlpPolicy"`` or a :class:`~sb3_es.common.policies.FlatPolicy` class.
+    :param env: Environment, env id or VecEnv; each env slot evaluates a different candidate.
+    :param n_delta: Number of random directions per generation (``2 * n_delta`` candidates).
+    :param n_top: Number of best directions used in the update (``b`` in the paper); defaults to ``n_delta``.
+    :param learning_rate: Step size ``alpha``, a float or a schedule.
+    :param delta_std: Exploration noise ``nu``, a float or a schedule.
+    :param zero_policy: Start from all-zero parameters (as in the paper).
+    :param alive_bonus_offset: Added to the fitness once per step, to cancel alive bonuses (e.g. -1 on Hopper).
+    :param n_eval_episodes: Episodes per candidate.
+    :param policy_kwargs: Keyword arguments for the policy (``net_arch``, ``normalize_observations``, ...).
+    :param stats_window_size: Number of episodes averaged in ``rollout/ep_rew_mean``.
+    :param tensorboard_log: TensorBoard log directory.
+    :param seed: Random seed.
+    :param verbose: 0 none, 1 training information, 2 debug.
+    :param device: Torch device (the CPU is the right choice for these policies).
+    :param _init_setup_model: Whether to build the model at construction.
+    """
+
+    policy_aliases: ClassVar[dict[str, type[BasePolicy]]] = {
+        "MlpPolicy": MlpPolicy,
+        "LinearPolicy": LinearPolicy,
+        "MultiInputPolicy": MlpPolicy,
+    }
+    strategy: ARSStrategy
+
+    def __init__(
+        self,
+        policy: str | type[FlatPolicy],
+        env: GymEnv | str | None,
+        n_delta: int = 8,
+        n_top: int | None = None,
+        learning_rate: float | Schedule = 0.02,
+        delta_std: float | Schedule = 0.05,
+        zero_policy: bool = True,
+        alive_bonus_offset: float = 0,
+        n_eval_episodes: int = 1,
+        policy_kwargs: dict[str, Any] | None = None,
+        stats_window_size: int = 100,
+        tensorboard_log: str | None = None,
+        seed: int | None = None,
+        verbose: int = 0,
+        device: th.device | str = "cpu",
+        _init_setup_model: bool = True,
+    ) -> None:
+        if int(n_delta) != n_delta or n_delta < 1:
+            raise ValueError(f"n_delta={n_delta}: it must be a positive integer (number of random directions).")
+        n_top = n_delta if n_top is None else n_top
+        if int(n_top) != n_top or not 1 <= n_top <= n_delta:
+            raise ValueError(f"n_top={n_top} must be an integer between 1 and n_delta={n_delta}.")
+        check_positive("delta_std", delta_std)
+        super().__init__(
+            policy,
+            env,
+            learning_rate=learning_rate,
+            n_eval_episodes=n_eval_episodes,
+            alive_bonus_offset=alive_bonus_offset,
+            zero_policy=zero_policy,
+            policy_kwargs=policy_kwargs,
+            stats_window_size=stats_window_size,
+            tensorboard_log=tensorboard_log,
+            seed=seed,
+            verbose=verbose,
+            device=device,
+        )
+        self.n_delta = int(n_delta)
+        self.n_top = int(n_top)
+        self.delta_std = delta_std
+        self.delta_std_schedule = FloatSchedule(delta_std)
+        if _init_setup_model:
+            self._setup_model()
+
+    def _make_strategy(self, center: np.ndarray, seed: np.random.SeedSequence) -> ARSStrategy:
+        return ARSStrategy(center, self.n_delta, self.n_top, seed=seed)  # type: ignore[arg-type]
+
+    def _ask(self) -> np.ndarray:
+        progress = self._current_progress_remaining
+        self.strategy.delta_std = float(self.delta_std_schedule(progress))
+        self.strategy.learning_rate = float(self.lr_schedule(progress))
+        check_positive("delta_std", self.strategy.delta_std)
+        return self.strategy.ask()
+
+    def learn(
+        self: SelfARS,
+        total_timesteps: int,
+        callback: MaybeCallback = None,
+        log_interval: int = 1,
+        tb_log_name: str = "ARS",
+        reset_num_timesteps: bool = True,
+        progress_bar: bool = False,
+    ) -> SelfARS:
+        return super().learn(total_timesteps, callback, log_interval, tb_log_name, reset_num_timesteps, progress_bar)

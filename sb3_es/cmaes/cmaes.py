@@ -1,0 +1,132 @@
+"""CMA-ES over the policy's flat parameters, with pycma doing the strategy."""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar, TypeVar
+
+import numpy as np
+import torch as th
+from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback
+
+from sb3_es.cmaes.policies import FlatPolicy
+from sb3_es.common.population_algorithm import PopulationAlgorithm, check_positive
+from sb3_es.strategies.cmaes import CMAESStrategy, Restarts
+
+SelfCMAES = TypeVar("SelfCMAES", bound="CMAES")
+
+
+class CMAES(PopulationAlgorithm):
+    """
+    CMA-ES (Hansen and Ostermeier, 2001) on the policy's flat parameters, through pycma.
+
+    Full covariance by default for small policies; with ``diagonal="auto"`` (the default) policies of
+    more than ``DIAGONAL_THRESHOLD`` parameters use separable CMA-ES (diagonal covariance), whose cost
+    per generation is linear in the number of parameters instead of cubic. When pycma's stop
+    conditions fire, training ends (logged under ``train/stop_*``) or restarts (IPOP/BIPOP).
+
+    :param policy: ``"MlpPolicy"``, ``"LinearPolicy"`` or a :class:`~sb3_es.common.policies.FlatPolicy` class.
+    :param env: Environment, env id or VecEnv; each env slot evaluates a different candidate.
+    :param sigma: Initial step size ``sigma0``.
+    :param population_size: Candidates per generation; ``None`` for pycma's default ``4 + 3 ln(n)``.
+    :param diagonal: ``True`` for separable (diagonal) CMA-ES, ``False`` for full covariance, ``"auto"``
+        for full covariance up to ``DIAGONAL_THRESHOLD`` parameters.
+    :param restarts: ``None``, ``"ipop"`` or ``"bipop"``.
+    :param max_restarts: Maximum number of restarts.
+    :param cma_options: Other pycma options, passed through.
+    :param zero_policy: Start from all-zero parameters instead of the policy's initialization.
+    :param alive_bonus_offset: Added to the fitness once per step.
+    :param n_eval_episodes: Episodes per candidate.
+    :param policy_kwargs: Keyword arguments for the policy.
+    :param stats_window_size: Episodes averaged in ``rollout/ep_rew_mean``.
+    :param tensorboard_log: TensorBoard log directory.
+    :param seed: Random seed.
+    :param verbose: Verbosity.
+    :param device: Torch device.
+    :param _init_setup_model: Whether to build the model at construction.
+    """
+
+    #: Above this many parameters, ``diagonal="auto"`` picks separable CMA-ES.
+    DIAGONAL_THRESHOLD: ClassVar[int] = 1000
+    strategy: CMAESStrategy
+
+    def __init__(
+        self,
+        policy: str | type[FlatPolicy],
+        env: GymEnv | str | None,
+        sigma: float = 0.1,
+        population_size: int | None = None,
+        diagonal: bool | str = "auto",
+        restarts: Restarts = None,
+        max_restarts: int = 9,
+        cma_options: dict[str, Any] | None = None,
+        zero_policy: bool = False,
+        alive_bonus_offset: float = 0,
+        n_eval_episodes: int = 1,
+        policy_kwargs: dict[str, Any] | None = None,
+        stats_window_size: int = 100,
+        tensorboard_log: str | None = None,
+        seed: int | None = None,
+        verbose: int = 0,
+        device: th.device | str = "cpu",
+        _init_setup_model: bool = True,
+    ) -> None:
+        check_positive("sigma", sigma)
+        if diagonal not in (True, False, "auto"):
+            raise ValueError(f"diagonal={diagonal!r}: choose True, False or 'auto'.")
+        super().__init__(
+            policy,
+            env,
+            learning_rate=1.0,  # unused: CMA-ES adapts its own step size
+            n_eval_episodes=n_eval_episodes,
+            alive_bonus_offset=alive_bonus_offset,
+            zero_policy=zero_policy,
+            policy_kwargs=policy_kwargs,
+            stats_window_size=stats_window_size,
+            tensorboard_log=tensorboard_log,
+            seed=seed,
+            verbose=verbose,
+            device=device,
+        )
+        self.sigma = sigma
+        self.population_size = population_size
+        self.diagonal = diagonal
+        self.restarts = restarts
+        self.max_restarts = max_restarts
+        self.cma_options = cma_options
+        if _init_setup_model:
+            self._setup_model()
+
+    def _make_strategy(self, center: np.ndarray, seed: np.random.SeedSequence) -> CMAESStrategy:
+        diagonal = len(center) > self.DIAGONAL_THRESHOLD if self.diagonal == "auto" else bool(self.diagonal)
+        return CMAESStrategy(
+            center,
+            sigma=self.sigma,
+            population_size=self.population_size,
+            diagonal=diagonal,
+            restarts=self.restarts,
+            max_restarts=self.max_restarts,
+            cma_options=self.cma_options,
+            seed=seed,
+        )
+
+    def _run_generation(self, evaluator, callback) -> bool:  # type: ignore[no-untyped-def]
+        completed = super()._run_generation(evaluator, callback)
+        if completed and self.strategy.last_stop:
+            for key, value in self.strategy.last_stop.items():
+                self.logger.record(f"train/stop_{key}", float(value) if isinstance(value, (int, float)) else str(value))
+            if self.strategy.stopped:
+                if self.verbose >= 1:
+                    print(f"CMA-ES stop conditions fired: {self.strategy.last_stop}; training ends.")
+                self._stop_training = True
+        return completed
+
+    def learn(
+        self: SelfCMAES,
+        total_timesteps: int,
+        callback: MaybeCallback = None,
+        log_interval: int = 1,
+        tb_log_name: str = "CMAES",
+        reset_num_timesteps: bool = True,
+        progress_bar: bool = False,
+    ) -> SelfCMAES:
+        return super().learn(total_timesteps, callback, log_interval, tb_log_name, reset_num_timesteps, progress_bar)

@@ -1,0 +1,346 @@
+"""The SB3 glue shared by every population method: learn loop, callbacks, logging, save/load."""
+
+from __future__ import annotations
+
+import io
+import json
+import pathlib
+import sys
+import time
+import zipfile
+from abc import abstractmethod
+from typing import Any, ClassVar, TypeVar
+
+import numpy as np
+import torch as th
+from stable_baselines3.common.base_class import BaseAlgorithm
+from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.policies import BasePolicy
+from stable_baselines3.common.save_util import load_from_zip_file
+from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
+from stable_baselines3.common.utils import safe_mean
+
+from sb3_es.common.policies import FlatPolicy, LinearPolicy, MlpPolicy
+from sb3_es.evaluation import PopulationEvaluator, PopulationResult, VecEnvEvaluator
+from sb3_es.strategies import Strategy
+
+SelfPopulationAlgorithm = TypeVar("SelfPopulationAlgorithm", bound="PopulationAlgorithm")
+
+
+def check_positive(name: str, value: float | Schedule) -> None:
+    """
+    Raise a clear error for a non-positive hyperparameter (a schedule is checked at the start of training).
+
+    :param name: Hyperparameter name, for the message.
+    :param value: A float or a schedule ``progress_remaining -> value``.
+    """
+    start = value(1.0) if callable(value) else value
+    if not np.isfinite(start) or start <= 0:
+        raise ValueError(f"{name}={start}: it must be a positive number (got {value!r}).")
+
+
+def check_save_file(path: str | pathlib.Path | io.BufferedIOBase, algorithm: str) -> None:
+    """
+    Check that ``path`` is a readable sb3-es save of ``algorithm`` before SB3 loads it.
+
+    :param path: File or file-like object given to ``load()``.
+    :param algorithm: Name of the class that loads it.
+    """
+    try:
+        data, params, _ = load_from_zip_file(path, device="cpu")
+    except (zipfile.BadZipFile, ValueError, KeyError, EOFError, json.JSONDecodeError, RuntimeError, OSError) as e:
+        if isinstance(e, FileNotFoundError):
+            raise
+        raise ValueError(
+            f"Cannot load {path!r}: it is corrupt or not a Stable-Baselines3 save file ({type(e).__name__}: {e}). "
+            "Re-save the model, or load the right file."
+        ) from e
+    finally:
+        if isinstance(path, io.BufferedIOBase):
+            path.seek(0)
+    if data is None or params is None or "policy" not in params:
+        raise ValueError(f"Cannot load {path!r}: the archive has no model data or no policy parameters.")
+    saved_by = data.get("_algorithm_name")
+    if saved_by != algorithm:
+        origin = (
+            f"by sb3-es {saved_by}"
+            if saved_by
+            else f"by another library or algorithm (policy class {data.get('policy_class')!r})"
+        )
+        hint = f" Load it with {saved_by}.load()." if saved_by else ""
+        raise ValueError(f"Cannot load {path!r} with {algorithm}.load(): it was saved {origin}.{hint}")
+    if not isinstance(data.get("strategy"), Strategy):
+        raise ValueError(
+            f"Cannot load {path!r}: the saved strategy state could not be read (the file is damaged or was "
+            "written by an incompatible version), so training could not continue where it stopped."
+        )
+
+
+class PopulationAlgorithm(BaseAlgorithm):
+    """
+    Base class of the population methods (ARS, OpenES, CMA-ES): an algorithm is mostly its strategy.
+
+    Each generation: the strategy proposes candidates (``_ask``), the evaluator runs them on the
+    environment (one batched forward pass per vec step, SB3 callbacks once per vec step), their
+    fitness goes back to the strategy (``tell``), the observation statistics are updated, and the
+    policy takes the strategy's new center.
+
+    Fitness of a candidate: mean return over ``n_eval_episodes`` episodes plus
+    ``alive_bonus_offset`` times the mean episode length. A non-finite fitness raises an error naming
+    the candidate and leaves the parameters unchanged.
+
+    :param policy: Policy class or alias (``"MlpPolicy"``, ``"LinearPolicy"``).
+    :param env: Environment, env id, or VecEnv. Every env slot evaluates a different candidate.
+    :param learning_rate: Step size (float or schedule); its meaning depends on the algorithm.
+    :param n_eval_episodes: Episodes per candidate.
+    :param alive_bonus_offset: Added to the fitness once per step, to cancel alive bonuses.
+    :param zero_policy: Start from all-zero parameters instead of the policy's random initialization.
+    :param policy_kwargs: Keyword arguments for the policy.
+    :param stats_window_size: Number of episodes averaged in ``rollout/ep_rew_mean``.
+    :param tensorboard_log: TensorBoard log directory.
+    :param seed: Seed for the strategy, the environments and torch.
+    :param verbose: 0 none, 1 training information, 2 debug.
+    :param device: Torch device; the CPU is the right choice for small policies.
+    :param _init_setup_model: Whether to build the model at construction.
+    """
+
+    policy: FlatPolicy
+    policy_aliases: ClassVar[dict[str, type[BasePolicy]]] = {
+        "MlpPolicy": MlpPolicy,
+        "LinearPolicy": LinearPolicy,
+        "MultiInputPolicy": MlpPolicy,
+    }
+
+    def __init__(
+        self,
+        policy: str | type[FlatPolicy],
+        env: GymEnv | str | None,
+        learning_rate: float | Schedule,
+        n_eval_episodes: int = 1,
+        alive_bonus_offset: float = 0.0,
+        zero_policy: bool = True,
+        policy_kwargs: dict[str, Any] | None = None,
+        stats_window_size: int = 100,
+        tensorboard_log: str | None = None,
+        seed: int | None = None,
+        verbose: int = 0,
+        device: th.device | str = "cpu",
+        _init_setup_model: bool = True,
+    ) -> None:
+        if isinstance(policy, str):
+            # Resolve aliases here: SB3 rejects the alias "MlpPolicy" for Dict observations, which we flatten.
+            policy = self._get_policy_from_name(policy)  # type: ignore[assignment]
+        super().__init__(
+            policy,
+            env,
+            learning_rate=learning_rate,
+            policy_kwargs=policy_kwargs,
+            stats_window_size=stats_window_size,
+            tensorboard_log=tensorboard_log,
+            verbose=verbose,
+            device=device,
+            support_multi_env=True,
+            seed=seed,
+        )
+        if int(n_eval_episodes) != n_eval_episodes or n_eval_episodes < 1:
+            raise ValueError(f"n_eval_episodes={n_eval_episodes}: it must be a positive integer.")
+        check_positive("learning_rate", learning_rate)
+        self.n_eval_episodes = int(n_eval_episodes)
+        self.alive_bonus_offset = float(alive_bonus_offset)
+        self.zero_policy = zero_policy
+        self._algorithm_name = type(self).__name__
+        self.strategy: Strategy | None = None
+        self._env_rng: np.random.Generator | None = None
+        self._evaluator: PopulationEvaluator | None = None
+        self._stop_training = False
+
+    # ------------------------------------------------------------------ model
+    def _setup_model(self) -> None:
+        self._setup_lr_schedule()
+        self.set_random_seed(self.seed)
+        policy = self.policy_class(self.observation_space, self.action_space, **self.policy_kwargs)
+        if not isinstance(policy, FlatPolicy):
+            raise TypeError(f"{self._algorithm_name} needs a FlatPolicy subclass, got {type(policy).__name__}.")
+        self.policy = policy.to(self.device)
+        if self.strategy is None:  # a loaded model brings its strategy (and its random state)
+            strategy_seed, env_seed = np.random.SeedSequence(self.seed).spawn(2)
+            center = np.zeros(self.policy.num_params) if self.zero_policy else self.policy.parameters_to_vector()
+            self.strategy = self._make_strategy(center, strategy_seed)
+            self._env_rng = np.random.default_rng(env_seed)
+        self.policy.load_from_vector(self.strategy.center)
+
+    @abstractmethod
+    def _make_strategy(self, center: np.ndarray, seed: np.random.SeedSequence) -> Strategy:
+        """
+        Build the strategy.
+
+        :param center: Initial parameters.
+        :param seed: Seed for the strategy's random generator.
+        :return: The strategy.
+        """
+
+    def _ask(self) -> np.ndarray:
+        """
+        Set schedule-driven hyperparameters on the strategy, then ask it for candidates.
+
+        :return: The candidates ``(population_size, num_params)``.
+        """
+        assert self.strategy is not None
+        return self.strategy.ask()
+
+    def _excluded_save_params(self) -> list[str]:
+        return [*super()._excluded_save_params(), "_evaluator"]
+
+    def set_parameters(
+        self,
+        load_path_or_dict: str | dict[str, th.Tensor],
+        exact_match: bool = True,
+        device: th.device | str = "auto",
+    ) -> None:
+        super().set_parameters(load_path_or_dict, exact_match=exact_match, device=device)
+        # Keep the strategy's center in step with weights written into the policy from outside.
+        assert self.strategy is not None
+        vector = self.policy.parameters_to_vector()
+        if not np.array_equal(vector.astype(np.float32), self.strategy.center.astype(np.float32)):
+            self.strategy.set_center(vector)
+
+    @classmethod
+    def load(  # type: ignore[override]
+        cls: type[SelfPopulationAlgorithm],
+        path: str | pathlib.Path | io.BufferedIOBase,
+        env: GymEnv | None = None,
+        device: th.device | str = "auto",
+        custom_objects: dict[str, Any] | None = None,
+        print_system_info: bool = False,
+        force_reset: bool = True,
+        **kwargs: Any,
+    ) -> SelfPopulationAlgorithm:
+        """
+        Load a model saved by ``save()``, with its strategy state, so that ``learn()`` continues the run.
+
+        Raises ``ValueError`` for a corrupt file or one saved by another algorithm.
+
+        :param path: Path or file-like object of the zip archive.
+        :param env: Environment to continue training on (optional for ``predict()``).
+        :param device: Torch device.
+        :param custom_objects: Objects replacing saved ones, as in SB3.
+        :param print_system_info: Print the system info of the save and of this machine.
+        :param force_reset: Reset the env before training.
+        :param kwargs: Attributes to override.
+        :return: The loaded model.
+        """
+        check_save_file(path, cls.__name__)
+        return super().load(path, env, device, custom_objects, print_system_info, force_reset, **kwargs)
+
+    # ------------------------------------------------------------------ training
+    def _get_evaluator(self) -> PopulationEvaluator:
+        if self.env is None:
+            raise ValueError("This model has no environment: pass env= to load() or call set_env() before learn().")
+        if not isinstance(self._evaluator, VecEnvEvaluator) or self._evaluator.env is not self.env:
+            self._evaluator = VecEnvEvaluator(self.env)
+        return self._evaluator
+
+    def learn(
+        self: SelfPopulationAlgorithm,
+        total_timesteps: int,
+        callback: MaybeCallback = None,
+        log_interval: int = 1,
+        tb_log_name: str = "run",
+        reset_num_timesteps: bool = True,
+        progress_bar: bool = False,
+    ) -> SelfPopulationAlgorithm:
+        """
+        Train for at least ``total_timesteps`` env steps (the last generation is always completed).
+
+        :param total_timesteps: Env steps to train for.
+        :param callback: Callback(s) called at every vec step; returning False stops training at once
+            (the interrupted generation is discarded, the parameters stay those of the last update).
+        :param log_interval: Number of generations between two log dumps.
+        :param tb_log_name: Name of the TensorBoard run.
+        :param reset_num_timesteps: Whether to reset ``num_timesteps`` (False to continue a run).
+        :param progress_bar: Display a progress bar (tqdm and rich).
+        :return: The trained model.
+        """
+        total_timesteps, callback = self._setup_learn(
+            total_timesteps, callback, reset_num_timesteps, tb_log_name, progress_bar
+        )
+        callback.on_training_start(locals(), globals())
+        evaluator = self._get_evaluator()
+        self._stop_training = False
+        while self.num_timesteps < total_timesteps and not self._stop_training:
+            self._update_current_progress_remaining(self.num_timesteps, total_timesteps)
+            if not self._run_generation(evaluator, callback):
+                break
+            self._n_updates += 1
+            if log_interval is not None and self._n_updates % log_interval == 0:
+                self.dump_logs()
+        callback.on_training_end()
+        return self
+
+    def _run_generation(self, evaluator: PopulationEvaluator, callback: BaseCallback) -> bool:
+        """
+        Ask, evaluate, tell. Returns False when a callback stopped training before the generation ended.
+
+        :param evaluator: Who runs the candidates.
+        :param callback: The callbacks.
+        :return: Whether the generation was completed and applied.
+        """
+        assert self.strategy is not None and self._env_rng is not None
+        population = self._ask()
+        seed = int(self._env_rng.integers(2**31 - 1))
+        callback.on_rollout_start()
+
+        def step_hook(n_envs: int, infos: list[dict[str, Any]], dones: np.ndarray) -> bool:
+            self.num_timesteps += n_envs
+            callback.update_locals({"infos": infos, "dones": dones, "n_envs": n_envs})
+            if not callback.on_step():
+                self._stop_training = True
+            return not self._stop_training
+
+        result = evaluator.evaluate(
+            self.policy, population, self.strategy.center, self.n_eval_episodes, seed, step_hook
+        )
+        callback.on_rollout_end()
+        if result.stopped:
+            return False
+        fitness = result.returns.mean(axis=1) + self.alive_bonus_offset * result.lengths.mean(axis=1)
+        for key, value in self.strategy.tell(fitness).items():
+            self.logger.record(f"train/{key}", value)
+        if self.policy.normalize_observations:
+            self.policy.update_obs_rms(*result.obs_stats.moments())
+        self.policy.load_from_vector(self.strategy.center)
+        self._record_generation(result, fitness)
+        return True
+
+    def _record_generation(self, result: PopulationResult, fitness: np.ndarray) -> None:
+        """
+        Update the episode buffer and record this generation's statistics.
+
+        :param result: The evaluation results.
+        :param fitness: The fitness given to the strategy.
+        """
+        if result.ep_infos:
+            self._update_info_buffer([{"episode": info} for info in result.ep_infos])
+        else:  # no Monitor wrapper: report what the evaluator measured
+            self._update_info_buffer(
+                [{"episode": {"r": r, "l": n}} for r, n in zip(result.returns.ravel(), result.lengths.ravel())]
+            )
+        self.logger.record("rollout/candidate_return_mean", float(result.returns.mean()))
+        self.logger.record("rollout/candidate_return_max", float(result.returns.mean(axis=1).max()))
+        self.logger.record("rollout/fitness_std", float(fitness.std()))
+        if result.center_returns:
+            self.logger.record("rollout/center_return", float(np.mean(result.center_returns)))
+
+    def dump_logs(self) -> None:
+        """Write the SB3 ``rollout/`` and ``time/`` keys and dump the logger."""
+        time_elapsed = max((time.time_ns() - self.start_time) / 1e9, sys.float_info.epsilon)
+        fps = int((self.num_timesteps - self._num_timesteps_at_start) / time_elapsed)
+        assert self.ep_info_buffer is not None
+        if len(self.ep_info_buffer) > 0:
+            self.logger.record("rollout/ep_rew_mean", safe_mean([info["r"] for info in self.ep_info_buffer]))
+            self.logger.record("rollout/ep_len_mean", safe_mean([info["l"] for info in self.ep_info_buffer]))
+        self.logger.record("time/iterations", self._n_updates, exclude="tensorboard")
+        self.logger.record("time/fps", fps)
+        self.logger.record("time/time_elapsed", int(time_elapsed), exclude="tensorboard")
+        self.logger.record("time/total_timesteps", self.num_timesteps, exclude="tensorboard")
+        self.logger.dump(step=self.num_timesteps)

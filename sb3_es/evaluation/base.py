@@ -1,0 +1,116 @@
+"""What a population evaluation returns, and the interface every evaluator implements."""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from sb3_es.common.policies import FlatPolicy
+
+#: Called once per vec step with ``(n_envs, infos, dones)``; returning False stops the evaluation.
+StepHook = Callable[[int, list[dict[str, Any]], np.ndarray], bool]
+
+
+@dataclass
+class ObsStats:
+    """
+    Sufficient statistics of a set of flattened observations: merging two is exact addition.
+
+    :param count: Number of observations.
+    :param total: Sum of the observations.
+    :param total_sq: Sum of their squares.
+    """
+
+    count: int
+    total: np.ndarray
+    total_sq: np.ndarray
+
+    @classmethod
+    def zeros(cls, dim: int) -> ObsStats:
+        """:return: Empty statistics for observations of size ``dim``."""
+        return cls(0, np.zeros(dim), np.zeros(dim))
+
+    def add(self, flat_obs: np.ndarray) -> None:
+        """
+        Add a batch of flattened observations.
+
+        :param flat_obs: Observations ``(n, dim)``.
+        """
+        flat_obs = flat_obs.astype(np.float64, copy=False)
+        self.count += flat_obs.shape[0]
+        self.total += flat_obs.sum(axis=0)
+        self.total_sq += np.square(flat_obs).sum(axis=0)
+
+    def merge(self, other: ObsStats) -> None:
+        """
+        Add another set of statistics (e.g. from another worker).
+
+        :param other: Statistics to add.
+        """
+        self.count += other.count
+        self.total += other.total
+        self.total_sq += other.total_sq
+
+    def moments(self) -> tuple[np.ndarray, np.ndarray, int]:
+        """:return: ``(mean, variance, count)`` for ``RunningMeanStd.update_from_moments``."""
+        mean = self.total / max(self.count, 1)
+        var = np.maximum(self.total_sq / max(self.count, 1) - np.square(mean), 0.0)
+        return mean, var, self.count
+
+
+@dataclass
+class PopulationResult:
+    """
+    Outcome of evaluating a population.
+
+    :param returns: Undiscounted return of each episode, ``(n_candidates, n_episodes)``.
+    :param lengths: Length of each episode, ``(n_candidates, n_episodes)``.
+    :param obs_stats: Statistics of the observations the candidates saw (for observation normalization).
+    :param n_steps: Env steps taken (every slot of every vec step, idle slots included).
+    :param ep_infos: Monitor ``info["episode"]`` dicts of the candidates' episodes.
+    :param center_returns: Returns of completed episodes of the center (mean) policy, run by idle slots.
+    :param center_lengths: Lengths of those episodes.
+    :param stopped: True when a callback stopped the evaluation: the results are then incomplete.
+    """
+
+    returns: np.ndarray
+    lengths: np.ndarray
+    obs_stats: ObsStats
+    n_steps: int = 0
+    ep_infos: list[dict[str, Any]] = field(default_factory=list)
+    center_returns: list[float] = field(default_factory=list)
+    center_lengths: list[int] = field(default_factory=list)
+    stopped: bool = False
+
+
+class PopulationEvaluator(ABC):
+    """Runs the candidates of a population in environments and reports their returns."""
+
+    @abstractmethod
+    def evaluate(
+        self,
+        policy: FlatPolicy,
+        population: np.ndarray,
+        center: np.ndarray,
+        n_episodes: int,
+        seed: int,
+        step_hook: StepHook | None = None,
+    ) -> PopulationResult:
+        """
+        Evaluate every candidate for ``n_episodes`` episodes.
+
+        :param policy: Policy giving the architecture and the (frozen) observation statistics.
+        :param population: Candidate parameter vectors ``(n_candidates, num_params)``.
+        :param center: Parameters of the center (mean) policy, run by slots left idle at the end.
+        :param n_episodes: Episodes per candidate.
+        :param seed: Seed for the environments' resets in this generation (makes runs reproducible).
+        :param step_hook: Called once per vec step; returning False stops the evaluation.
+        :return: The results.
+        """
+
+    def close(self) -> None:  # noqa: B027 - optional hook
+        """Release resources (worker processes, actors)."""

@@ -1,0 +1,92 @@
+"""Population evaluation on any SB3 VecEnv, in the current process."""
+
+from __future__ import annotations
+
+from collections import deque
+
+import numpy as np
+from stable_baselines3.common.vec_env import VecEnv
+
+from sb3_es.common.policies import FlatPolicy
+from sb3_es.evaluation.base import ObsStats, PopulationEvaluator, PopulationResult, StepHook
+
+
+class VecEnvEvaluator(PopulationEvaluator):
+    """
+    Evaluates a population on an SB3 ``VecEnv`` (``DummyVecEnv``, ``SubprocVecEnv``, ``VecNormalize``, ...).
+
+    Every env slot runs a different candidate and takes the next pending (candidate, episode) job as
+    soon as its episode ends; all slots share one batched forward pass per vec step. Slots left without
+    a job at the end of the generation run the center policy, whose completed episodes are reported
+    as a free evaluation of the mean. At the start of each generation the VecEnv is re-seeded and reset,
+    so a generation's outcome depends only on the seed and the parameters.
+
+    :param env: The vectorized environment.
+    """
+
+    def __init__(self, env: VecEnv) -> None:
+        self.env = env
+
+    def evaluate(
+        self,
+        policy: FlatPolicy,
+        population: np.ndarray,
+        center: np.ndarray,
+        n_episodes: int,
+        seed: int,
+        step_hook: StepHook | None = None,
+    ) -> PopulationResult:
+        env = self.env
+        n_envs = env.num_envs
+        n_candidates = population.shape[0]
+        returns = np.zeros((n_candidates, n_episodes))
+        lengths = np.zeros((n_candidates, n_episodes), dtype=np.int64)
+        result = PopulationResult(returns, lengths, ObsStats.zeros(policy.obs_dim))
+
+        params = np.asarray(population, dtype=np.float32)
+        center_params = np.asarray(center, dtype=np.float32)
+        # Jobs run episode by episode so that every candidate gets its first episode early.
+        pending = deque((c, e) for e in range(n_episodes) for c in range(n_candidates))
+        remaining = len(pending)
+        slot_job: list[tuple[int, int] | None] = [None] * n_envs
+        slot_params = np.repeat(center_params[None], n_envs, axis=0)
+
+        def assign(slot: int) -> None:
+            job = pending.popleft() if pending else None
+            slot_job[slot] = job
+            slot_params[slot] = params[job[0]] if job is not None else center_params
+
+        for slot in range(n_envs):
+            assign(slot)
+        ep_return = np.zeros(n_envs)
+        ep_length = np.zeros(n_envs, dtype=np.int64)
+        env.seed(seed)
+        obs = env.reset()
+
+        while remaining > 0:
+            flat_obs = policy.flatten_obs(obs)  # type: ignore[arg-type]
+            active = np.array([job is not None for job in slot_job])
+            result.obs_stats.add(flat_obs[active])
+            actions = policy.population_actions(slot_params, flat_obs)
+            obs, rewards, dones, infos = env.step(actions)
+            result.n_steps += n_envs
+            ep_return += rewards
+            ep_length += 1
+            for slot in np.flatnonzero(dones).tolist():
+                job = slot_job[slot]
+                if job is None:
+                    result.center_returns.append(float(ep_return[slot]))
+                    result.center_lengths.append(int(ep_length[slot]))
+                else:
+                    returns[job] = ep_return[slot]
+                    lengths[job] = ep_length[slot]
+                    remaining -= 1
+                    if "episode" in infos[slot]:
+                        result.ep_infos.append(infos[slot]["episode"])
+                ep_return[slot] = 0.0
+                ep_length[slot] = 0
+                assign(slot)
+            if step_hook is not None and not step_hook(n_envs, infos, dones):
+                result.stopped = remaining > 0
+                break
+        return result

@@ -1,0 +1,63 @@
+"""Augmented Random Search update (Mania et al., 2018), as an ask/tell strategy."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from sb3_es.strategies.base import Strategy, check_fitness
+
+
+class ARSStrategy(Strategy):
+    """
+    ARS: antithetic perturbations ``theta +/- delta_std * delta``, top-``n_top`` directions, and a step
+    scaled by the standard deviation of the returns used (ARS paper, Algorithm 2, V1/V2 and V1-t/V2-t).
+
+    Candidates are ordered ``[theta + delta_std * d_1..n, theta - delta_std * d_1..n]``.
+
+    :param center: Initial parameters.
+    :param n_delta: Number of random directions per generation.
+    :param n_top: Number of best directions used in the update (``b`` in the paper).
+    :param seed: Seed of the random generator.
+    """
+
+    def __init__(self, center: np.ndarray, n_delta: int, n_top: int, seed: int | None = None) -> None:
+        super().__init__(center, seed)
+        if n_delta < 1:
+            raise ValueError(f"n_delta={n_delta}: it must be a positive integer.")
+        if not 1 <= n_top <= n_delta:
+            raise ValueError(f"n_top={n_top} must be between 1 and n_delta={n_delta}.")
+        self.n_delta = n_delta
+        self.n_top = n_top
+        self.delta_std = 0.05
+        self.learning_rate = 0.02
+        self._deltas: np.ndarray | None = None
+
+    @property
+    def population_size(self) -> int:
+        """:return: ``2 * n_delta``."""
+        return 2 * self.n_delta
+
+    def ask(self) -> np.ndarray:
+        self._deltas = self.rng.standard_normal((self.n_delta, self.num_params))
+        scaled = self.delta_std * self._deltas
+        return np.concatenate([self.center + scaled, self.center - scaled])
+
+    def tell(self, fitness: np.ndarray) -> dict[str, float]:
+        if self._deltas is None:
+            raise RuntimeError("tell() called before ask().")
+        fitness = check_fitness(fitness, self.population_size)
+        plus, minus = fitness[: self.n_delta], fitness[self.n_delta :]
+        # Directions ranked by max(r+, r-); ties keep the sampling order (stable sort).
+        top = np.argsort(-np.maximum(plus, minus), kind="stable")[: self.n_top]
+        used = np.concatenate([plus[top], minus[top]])
+        # Population standard deviation of the 2b returns used, as in the paper and its reference code.
+        return_std = float(used.std())
+        step_size = self.learning_rate / (self.n_top * return_std) if return_std > 0 else 0.0
+        self.center = self.center + step_size * ((plus[top] - minus[top]) @ self._deltas[top])
+        self._deltas = None
+        return {
+            "learning_rate": self.learning_rate,
+            "delta_std": self.delta_std,
+            "step_size": step_size,
+            "return_std": return_std,
+        }

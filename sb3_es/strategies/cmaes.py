@@ -1,0 +1,160 @@
+"""CMA-ES through pycma (``cma``): ask/tell, maximization by negation, optional IPOP/BIPOP restarts."""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import warnings
+from collections.abc import Iterator
+from typing import Any, Literal
+
+import numpy as np
+
+with warnings.catch_warnings():  # pycma warns at import when matplotlib (only used for its plots) is absent
+    warnings.simplefilter("ignore")
+    import cma
+
+from sb3_es.strategies.base import Strategy, check_fitness
+
+Restarts = Literal["ipop", "bipop"] | None
+
+
+class CMAESStrategy(Strategy):
+    """
+    Covariance Matrix Adaptation ES, delegated to pycma's ``CMAEvolutionStrategy``.
+
+    pycma draws from NumPy's global random state; this wrapper gives it a private state (swapped in
+    around every pycma call) so that runs are reproducible and a pickled strategy resumes exactly,
+    whatever else uses ``np.random``.
+
+    :param center: Initial mean ``x0``.
+    :param sigma: Initial step size ``sigma0``.
+    :param population_size: Candidates per generation; ``None`` for pycma's default ``4 + 3 ln(n)``.
+    :param diagonal: Separable CMA-ES (diagonal covariance, pycma's ``CMA_diagonal=True``), for large policies.
+    :param restarts: ``None``, ``"ipop"`` (population doubles at each restart) or ``"bipop"`` (alternates
+        large-population restarts with small-population, small-step ones, Hansen 2009).
+    :param max_restarts: Maximum number of restarts.
+    :param cma_options: Other pycma options, passed through (e.g. ``{"tolfun": 1e-3}``).
+    :param seed: Seed of the private random state.
+    """
+
+    def __init__(
+        self,
+        center: np.ndarray,
+        sigma: float = 0.1,
+        population_size: int | None = None,
+        diagonal: bool = False,
+        restarts: Restarts = None,
+        max_restarts: int = 9,
+        cma_options: dict[str, Any] | None = None,
+        seed: int | np.random.SeedSequence | None = None,
+    ) -> None:
+        super().__init__(center, seed)  # type: ignore[arg-type]
+        if not sigma > 0:
+            raise ValueError(f"sigma={sigma}: the initial step size must be positive.")
+        if population_size is not None and population_size < 2:
+            raise ValueError(f"population_size={population_size}: it must be at least 2 (or None for pycma's).")
+        if restarts not in (None, "ipop", "bipop"):
+            raise ValueError(f"restarts={restarts!r}: choose None, 'ipop' or 'bipop'.")
+        self.sigma0 = float(sigma)
+        self.diagonal = diagonal
+        self.restarts = restarts
+        self.max_restarts = max_restarts
+        self.cma_options = dict(cma_options or {})
+        for key in ("popsize", "seed", "CMA_diagonal"):
+            if key in self.cma_options:
+                raise ValueError(f"cma_options[{key!r}] is set by sb3-es; use the matching CMAES argument instead.")
+        self.default_population_size = int(4 + math.floor(3 * math.log(self.num_params)))
+        self.base_population_size = population_size or self.default_population_size
+        self.n_restarts = 0
+        self.last_stop: dict[str, Any] = {}
+        self.best_params = self.center.copy()
+        self.best_fitness = -np.inf
+        self._budget = {"large": 0, "small": 0}
+        self._regime = "large"
+        self._large_restarts = 0
+        self._asked: list[np.ndarray] | None = None
+        self._np_state = np.random.RandomState(int(self.rng.integers(2**31 - 1))).get_state()
+        self.es = self._new_es(self.center, self.sigma0, self.base_population_size)
+
+    @contextlib.contextmanager
+    def _private_random(self) -> Iterator[None]:
+        outer = np.random.get_state()
+        np.random.set_state(self._np_state)
+        try:
+            yield
+        finally:
+            self._np_state = np.random.get_state()
+            np.random.set_state(outer)
+
+    def _new_es(self, x0: np.ndarray, sigma0: float, popsize: int) -> cma.CMAEvolutionStrategy:
+        options = {
+            "popsize": popsize,
+            "CMA_diagonal": self.diagonal,
+            "verbose": -9,
+            "seed": int(self.rng.integers(1, 2**31 - 1)),
+            **self.cma_options,
+        }
+        with self._private_random():
+            return cma.CMAEvolutionStrategy(x0, sigma0, options)
+
+    @property
+    def population_size(self) -> int:
+        """:return: Candidates in the current generation."""
+        return int(self.es.popsize)
+
+    @property
+    def sigma(self) -> float:
+        """:return: Current overall step size."""
+        return float(self.es.sigma)
+
+    def ask(self) -> np.ndarray:
+        with self._private_random():
+            self._asked = self.es.ask()
+        return np.asarray(self._asked, dtype=np.float64)
+
+    def tell(self, fitness: np.ndarray) -> dict[str, float]:
+        if self._asked is None:
+            raise RuntimeError("tell() called before ask().")
+        fitness = check_fitness(fitness, len(self._asked))
+        with self._private_random():
+            self.es.tell(self._asked, (-fitness).tolist())  # pycma minimizes
+        best = int(np.argmax(fitness))
+        if fitness[best] > self.best_fitness:
+            self.best_fitness = float(fitness[best])
+            self.best_params = np.asarray(self._asked[best], dtype=np.float64).copy()
+        self._asked = None
+        self.center = np.asarray(self.es.mean, dtype=np.float64).copy()
+        stats = {"sigma": self.sigma, "population_size": float(self.population_size), "restarts": self.n_restarts}
+        self.last_stop = dict(self.es.stop())
+        if self.last_stop and self.restarts is not None and self.n_restarts < self.max_restarts:
+            self._restart()
+        return stats
+
+    @property
+    def stopped(self) -> bool:
+        """:return: Whether pycma's stop conditions fired and no restart is left."""
+        return bool(self.last_stop) and (self.restarts is None or self.n_restarts >= self.max_restarts)
+
+    def _restart(self) -> None:
+        """Start a new pycma run from the best candidate found, with the population size of the restart scheme."""
+        self.n_restarts += 1
+        self._budget[self._regime] += int(self.es.countevals)
+        base = self.base_population_size
+        if self.restarts == "ipop":
+            popsize, sigma0, regime = 2 * self.population_size, self.sigma0, "large"
+        else:  # BIPOP: run the regime that has used less of the evaluation budget so far
+            regime = "large" if self._budget["large"] <= self._budget["small"] else "small"
+            if regime == "large":
+                self._large_restarts += 1
+                popsize, sigma0 = base * 2**self._large_restarts, self.sigma0
+            else:
+                ratio = 0.5 * 2**self._large_restarts
+                popsize = max(2, int(base * ratio ** (self.rng.uniform() ** 2)))
+                sigma0 = self.sigma0 * 10 ** (-2 * self.rng.uniform())
+        self._regime = regime
+        self.es = self._new_es(self.best_params, sigma0, popsize)
+
+    def set_center(self, center: np.ndarray) -> None:
+        super().set_center(center)
+        self.es = self._new_es(self.center, self.sigma, self.population_size)
