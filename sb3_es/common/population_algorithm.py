@@ -5,6 +5,7 @@ from __future__ import annotations
 import io
 import json
 import pathlib
+import pickle
 import sys
 import time
 import zipfile
@@ -39,6 +40,30 @@ def check_positive(name: str, value: float | Schedule) -> None:
         raise ValueError(f"{name}={start}: it must be a positive number (got {value!r}).")
 
 
+#: Attributes that identify the algorithm of a save made by Stable-Baselines3 or sb3-contrib.
+_FOREIGN_MARKERS = (
+    ("clip_range", "PPO"),
+    ("exploration_schedule", "DQN"),
+    ("target_policy_noise", "TD3"),
+    ("target_entropy", "SAC"),
+    ("n_delta", "sb3-contrib's ARS"),
+    ("gae_lambda", "A2C"),
+)
+
+
+def guess_foreign_algorithm(data: dict[str, Any]) -> str:
+    """
+    Name the algorithm that most likely wrote a save that sb3-es did not write.
+
+    :param data: The save's data dictionary.
+    :return: A description such as ``"PPO"`` or ``"another library or algorithm"``.
+    """
+    for key, name in _FOREIGN_MARKERS:
+        if key in data:
+            return name
+    return "another library or algorithm"
+
+
 def check_save_file(path: str | pathlib.Path | io.BufferedIOBase, algorithm: str) -> None:
     """
     Check that ``path`` is a readable sb3-es save of ``algorithm`` before SB3 loads it.
@@ -48,7 +73,18 @@ def check_save_file(path: str | pathlib.Path | io.BufferedIOBase, algorithm: str
     """
     try:
         data, params, _ = load_from_zip_file(path, device="cpu")
-    except (zipfile.BadZipFile, ValueError, KeyError, EOFError, json.JSONDecodeError, RuntimeError, OSError) as e:
+    except (
+        zipfile.BadZipFile,
+        ValueError,
+        KeyError,
+        EOFError,
+        json.JSONDecodeError,
+        RuntimeError,
+        OSError,
+        pickle.UnpicklingError,
+        ImportError,
+        AttributeError,
+    ) as e:
         if isinstance(e, FileNotFoundError):
             raise
         raise ValueError(
@@ -65,7 +101,7 @@ def check_save_file(path: str | pathlib.Path | io.BufferedIOBase, algorithm: str
         origin = (
             f"by sb3-es {saved_by}"
             if saved_by
-            else f"by another library or algorithm (policy class {data.get('policy_class')!r})"
+            else f"by {guess_foreign_algorithm(data)} (policy class {data.get('policy_class')!r})"
         )
         hint = f" Load it with {saved_by}.load()." if saved_by else ""
         raise ValueError(f"Cannot load {path!r} with {algorithm}.load(): it was saved {origin}.{hint}")
@@ -261,11 +297,11 @@ class PopulationAlgorithm(BaseAlgorithm):
         :param progress_bar: Display a progress bar (tqdm and rich).
         :return: The trained model.
         """
+        evaluator = self._get_evaluator()
         total_timesteps, callback = self._setup_learn(
             total_timesteps, callback, reset_num_timesteps, tb_log_name, progress_bar
         )
         callback.on_training_start(locals(), globals())
-        evaluator = self._get_evaluator()
         self._stop_training = False
         while self.num_timesteps < total_timesteps and not self._stop_training:
             self._update_current_progress_remaining(self.num_timesteps, total_timesteps)

@@ -1,0 +1,55 @@
+"""ARS on BipedalWalker-v3, with TensorBoard logs and a saved model.
+
+Run::
+
+    python examples/ars_bipedal_walker.py --timesteps 2000000 --n-envs 2
+
+Hyperparameters start from rl-baselines3-zoo's ``ars.yml`` entry for BipedalWalker-v3 (linear policy,
+observation normalization inside the policy, alive bonus offset). Each env slot evaluates a different
+candidate; ``--subproc`` puts each env in its own process.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.evaluation import evaluate_policy
+from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
+
+from sb3_es import ARS
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--timesteps", type=int, default=2_000_000)
+    parser.add_argument("--n-envs", type=int, default=2)
+    parser.add_argument("--subproc", action="store_true")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--tensorboard-log", default="runs")
+    parser.add_argument("--save-path", default="runs/ars_bipedal_walker.zip")
+    args = parser.parse_args()
+
+    vec_env_cls = SubprocVecEnv if args.subproc else DummyVecEnv
+    env = make_vec_env("BipedalWalker-v3", n_envs=args.n_envs, seed=args.seed, vec_env_cls=vec_env_cls)
+    model = ARS(
+        "LinearPolicy",
+        env,
+        n_delta=40,
+        n_top=30,
+        learning_rate=0.02,
+        delta_std=0.0075,
+        alive_bonus_offset=-0.1,
+        tensorboard_log=args.tensorboard_log,
+        seed=args.seed,
+        verbose=1,
+    )
+    model.learn(args.timesteps, progress_bar=True)
+    model.save(args.save_path)
+    mean, std = evaluate_policy(model, make_vec_env("BipedalWalker-v3", seed=args.seed + 1), n_eval_episodes=10)
+    print(f"mean return over 10 episodes: {mean:.1f} +/- {std:.1f}")
+    print(f"model saved to {args.save_path}; TensorBoard logs in {model.logger.get_dir()}")
+
+
+if __name__ == "__main__":
+    main()

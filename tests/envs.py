@@ -1,0 +1,137 @@
+"""Small environments and wrappers shared by the tests."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from sb3_es.common.policies import FlatPolicy
+
+
+class ToyEnv(gym.Env):
+    """
+    Fully deterministic env (the reset seed is ignored) whose reward and episode length depend on the actions.
+
+    State: position ``x`` and time ``t``; observation ``[x, t / 10]``. Each step moves ``x`` by the action
+    (``Box``) or by ``+-0.15`` (``Discrete(2)``); the reward is ``1 + x - a**2`` and the episode terminates
+    when ``|x| >= 1`` or is truncated after ``max_steps``. Different parameters thus give different returns
+    *and* lengths, so any mix-up of which slot runs which candidate changes the results.
+    """
+
+    metadata: dict[str, Any] = {"render_modes": []}
+
+    def __init__(self, discrete: bool = False, max_steps: int = 12, nan_reward_if_positive: bool = False) -> None:
+        self.observation_space = spaces.Box(-10.0, 10.0, shape=(2,), dtype=np.float32)
+        if discrete:
+            self.action_space: spaces.Space = spaces.Discrete(2)
+        else:
+            self.action_space = spaces.Box(-0.5, 0.5, shape=(1,), dtype=np.float32)
+        self.discrete = discrete
+        self.max_steps = max_steps
+        self.nan_reward_if_positive = nan_reward_if_positive
+        self.x = 0.0
+        self.t = 0
+
+    def _obs(self) -> np.ndarray:
+        return np.array([self.x, self.t / 10.0], dtype=np.float32)
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[np.ndarray, dict]:
+        super().reset(seed=seed)
+        self.x = 0.1
+        self.t = 0
+        return self._obs(), {}
+
+    def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict]:
+        if self.discrete:
+            a = 0.15 if int(action) == 1 else -0.15
+        else:
+            a = float(np.asarray(action).reshape(-1)[0])
+        self.x += a
+        self.t += 1
+        reward = 1.0 + self.x - a * a
+        if self.nan_reward_if_positive and a > 0:
+            reward = float("nan")
+        terminated = abs(self.x) >= 1.0
+        truncated = self.t >= self.max_steps
+        return self._obs(), reward, terminated, truncated, {}
+
+
+class ConstantObsEnv(gym.Env):
+    """One-dimensional env with a constant observation ``[1]`` and episodes of ``length`` steps."""
+
+    def __init__(self, length: int = 3, nan_reward_if_positive: bool = True) -> None:
+        self.observation_space = spaces.Box(-10.0, 10.0, shape=(1,), dtype=np.float32)
+        self.action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
+        self.length = length
+        self.nan_reward_if_positive = nan_reward_if_positive
+        self.t = 0
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[np.ndarray, dict]:
+        super().reset(seed=seed)
+        self.t = 0
+        return np.ones(1, dtype=np.float32), {}
+
+    def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict]:
+        self.t += 1
+        a = float(np.asarray(action).reshape(-1)[0])
+        reward = float("nan") if self.nan_reward_if_positive and a > 0 else -abs(a)
+        return np.ones(1, dtype=np.float32), reward, False, self.t >= self.length, {}
+
+
+class StepCounter(gym.Wrapper):
+    """Counts ``step()`` calls in a shared list ``counter`` (``counter[0]``), across every wrapped env."""
+
+    def __init__(self, env: gym.Env, counter: list[int]) -> None:
+        super().__init__(env)
+        self.counter = counter
+
+    def step(self, action: Any) -> Any:
+        self.counter[0] += 1
+        return self.env.step(action)
+
+
+class NaNRewardWrapper(gym.Wrapper):
+    """Returns a NaN reward at every step."""
+
+    def step(self, action: Any) -> Any:
+        obs, _, terminated, truncated, info = self.env.step(action)
+        return obs, float("nan"), terminated, truncated, info
+
+
+class MultiDiscreteActionEnv(gym.Env):
+    """An env with a ``MultiDiscrete`` action space (unsupported by sb3-es policies)."""
+
+    def __init__(self) -> None:
+        self.observation_space = spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
+        self.action_space = spaces.MultiDiscrete([3, 2])
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[np.ndarray, dict]:
+        super().reset(seed=seed)
+        return np.zeros(2, dtype=np.float32), {}
+
+    def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict]:
+        return np.zeros(2, dtype=np.float32), 0.0, False, True, {}
+
+
+def rollout(
+    env: gym.Env, policy: FlatPolicy, params: np.ndarray, seed: int | None = None
+) -> tuple[float, int, list[np.ndarray]]:
+    """
+    Run one episode sequentially with ``predict()`` of ``policy`` loaded with ``params``.
+
+    :return: The return, the length and the flattened observations the policy acted on.
+    """
+    policy.load_from_vector(params)
+    obs, _ = env.reset(seed=seed)
+    total, length, seen = 0.0, 0, []
+    while True:
+        seen.append(np.asarray(obs, dtype=np.float64).reshape(-1))
+        action, _ = policy.predict(obs, deterministic=True)
+        obs, reward, terminated, truncated, _ = env.step(action)
+        total += float(np.float32(reward))  # VecEnvs store rewards as float32
+        length += 1
+        if terminated or truncated:
+            return total, length, seen
