@@ -12,6 +12,7 @@ from stable_baselines3.common.utils import FloatSchedule
 
 from sb3_es.ars.policies import FlatPolicy, LinearPolicy, MlpPolicy
 from sb3_es.common.population_algorithm import PopulationAlgorithm, check_positive
+from sb3_es.evaluation import PopulationEvaluator
 from sb3_es.strategies import ARSStrategy
 
 SelfARS = TypeVar("SelfARS", bound="ARS")
@@ -41,6 +42,7 @@ class ARS(PopulationAlgorithm):
     :param seed: Random seed.
     :param verbose: 0 none, 1 training information, 2 debug.
     :param device: Torch device (the CPU is the right choice for these policies).
+    :param evaluator: ``"local"`` or a :class:`~sb3_es.evaluation.PopulationEvaluator` (e.g. Ray); not saved.
     :param _init_setup_model: Whether to build the model at construction.
     """
 
@@ -68,6 +70,7 @@ class ARS(PopulationAlgorithm):
         seed: int | None = None,
         verbose: int = 0,
         device: th.device | str = "cpu",
+        evaluator: str | PopulationEvaluator = "local",
         _init_setup_model: bool = True,
     ) -> None:
         if int(n_delta) != n_delta or n_delta < 1:
@@ -89,6 +92,7 @@ class ARS(PopulationAlgorithm):
             seed=seed,
             verbose=verbose,
             device=device,
+            evaluator=evaluator,
         )
         self.n_delta = int(n_delta)
         self.n_top = int(n_top)

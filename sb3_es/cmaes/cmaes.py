@@ -10,6 +10,7 @@ from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback
 
 from sb3_es.cmaes.policies import FlatPolicy
 from sb3_es.common.population_algorithm import PopulationAlgorithm, check_positive
+from sb3_es.evaluation import PopulationEvaluator
 from sb3_es.strategies.cmaes import CMAESStrategy, Restarts
 
 SelfCMAES = TypeVar("SelfCMAES", bound="CMAES")
@@ -42,6 +43,7 @@ class CMAES(PopulationAlgorithm):
     :param seed: Random seed.
     :param verbose: Verbosity.
     :param device: Torch device.
+    :param evaluator: ``"local"`` or a :class:`~sb3_es.evaluation.PopulationEvaluator` (e.g. Ray); not saved.
     :param _init_setup_model: Whether to build the model at construction.
     """
 
@@ -68,6 +70,7 @@ class CMAES(PopulationAlgorithm):
         seed: int | None = None,
         verbose: int = 0,
         device: th.device | str = "cpu",
+        evaluator: str | PopulationEvaluator = "local",
         _init_setup_model: bool = True,
     ) -> None:
         check_positive("sigma", sigma)
@@ -86,6 +89,7 @@ class CMAES(PopulationAlgorithm):
             seed=seed,
             verbose=verbose,
             device=device,
+            evaluator=evaluator,
         )
         self.sigma = sigma
         self.population_size = population_size

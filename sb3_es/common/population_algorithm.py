@@ -137,6 +137,8 @@ class PopulationAlgorithm(BaseAlgorithm):
     :param seed: Seed for the strategy, the environments and torch.
     :param verbose: 0 none, 1 training information, 2 debug.
     :param device: Torch device; the CPU is the right choice for small policies.
+    :param evaluator: Who runs the candidates: ``"local"`` (the model's VecEnv, in this process) or a
+        :class:`~sb3_es.evaluation.PopulationEvaluator` instance. Not saved with the model.
     :param _init_setup_model: Whether to build the model at construction.
     """
 
@@ -161,6 +163,7 @@ class PopulationAlgorithm(BaseAlgorithm):
         seed: int | None = None,
         verbose: int = 0,
         device: th.device | str = "cpu",
+        evaluator: str | PopulationEvaluator = "local",
         _init_setup_model: bool = True,
     ) -> None:
         if isinstance(policy, str):
@@ -187,6 +190,9 @@ class PopulationAlgorithm(BaseAlgorithm):
         self._algorithm_name = type(self).__name__
         self.strategy: Strategy | None = None
         self._env_rng: np.random.Generator | None = None
+        if not (evaluator == "local" or isinstance(evaluator, PopulationEvaluator)):
+            raise ValueError(f"evaluator={evaluator!r}: use 'local' or a PopulationEvaluator instance.")
+        self.evaluator = evaluator
         self._evaluator: PopulationEvaluator | None = None
         self._stop_training = False
 
@@ -225,7 +231,7 @@ class PopulationAlgorithm(BaseAlgorithm):
         return self.strategy.ask()
 
     def _excluded_save_params(self) -> list[str]:
-        return [*super()._excluded_save_params(), "_evaluator"]
+        return [*super()._excluded_save_params(), "evaluator", "_evaluator"]
 
     def set_parameters(
         self,
@@ -270,6 +276,8 @@ class PopulationAlgorithm(BaseAlgorithm):
 
     # ------------------------------------------------------------------ training
     def _get_evaluator(self) -> PopulationEvaluator:
+        if isinstance(self.evaluator, PopulationEvaluator):
+            return self.evaluator
         if self.env is None:
             raise ValueError("This model has no environment: pass env= to load() or call set_env() before learn().")
         if not isinstance(self._evaluator, VecEnvEvaluator) or self._evaluator.env is not self.env:

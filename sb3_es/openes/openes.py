@@ -10,6 +10,7 @@ from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedul
 from stable_baselines3.common.utils import FloatSchedule
 
 from sb3_es.common.population_algorithm import PopulationAlgorithm, check_positive
+from sb3_es.evaluation import PopulationEvaluator
 from sb3_es.openes.policies import FlatPolicy
 from sb3_es.strategies.openes import FitnessShaping, OpenESStrategy
 
@@ -64,6 +65,7 @@ class OpenES(PopulationAlgorithm):
     :param seed: Random seed.
     :param verbose: Verbosity.
     :param device: Torch device.
+    :param evaluator: ``"local"`` or a :class:`~sb3_es.evaluation.PopulationEvaluator` (e.g. Ray); not saved.
     :param _init_setup_model: Whether to build the model at construction.
     """
 
@@ -95,6 +97,7 @@ class OpenES(PopulationAlgorithm):
         seed: int | None = None,
         verbose: int = 0,
         device: th.device | str = "cpu",
+        evaluator: str | PopulationEvaluator = "local",
         _init_setup_model: bool = True,
     ) -> None:
         check_positive("sigma", sigma)
@@ -114,6 +117,7 @@ class OpenES(PopulationAlgorithm):
             seed=seed,
             verbose=verbose,
             device=device,
+            evaluator=evaluator,
         )
         self.population_size = population_size
         self.sigma = sigma

@@ -1,0 +1,323 @@
+"""Stochastic categorical policies over discretized actions, for :class:`~sb3_es.reinforce.REINFORCE`.
+
+A continuous ``Box`` action space is discretized into ``n_bins`` evenly spaced levels per dimension,
+from ``low`` to ``high`` (3 levels on BipedalWalker give the torques ``-1, 0, 1``). Two parameterizations:
+
+* **joint**: one categorical over every combination of levels, ``n_bins ** action_dim`` actions
+  (``3 ** 4 = 81`` on BipedalWalker). It can represent correlations between dimensions but grows
+  exponentially, so it is refused above ``max_joint_actions``.
+* **factorized** (the default): an independent categorical per dimension, ``n_bins * action_dim`` logits,
+  which scales to the 6 joints of dm_control's walker or the 17 of Humanoid.
+
+A native ``Discrete`` action space gets a plain categorical. ``predict()`` returns actions of the
+original env (the levels, inside the ``Box``), so the policy works like any SB3 policy.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import torch as th
+from gymnasium import spaces
+from stable_baselines3.common.distributions import CategoricalDistribution, MultiCategoricalDistribution
+from stable_baselines3.common.policies import BasePolicy
+from stable_baselines3.common.preprocessing import get_flattened_obs_dim
+from stable_baselines3.common.torch_layers import BaseFeaturesExtractor, FlattenExtractor, create_mlp
+from stable_baselines3.common.type_aliases import PyTorchObs, Schedule
+from torch import nn
+
+#: Default limit on the number of joint actions (``n_bins ** action_dim``).
+MAX_JOINT_ACTIONS = 100_000
+
+
+class DictFlattenExtractor(BaseFeaturesExtractor):
+    """
+    Flatten every entry of a ``Dict`` observation and concatenate them (keys in the space's order).
+
+    Unlike SB3's ``CombinedExtractor`` it accepts scalar entries (shape ``()``), such as the ``height``
+    of dm_control's walker exposed through shimmy, and it has no parameters.
+
+    :param observation_space: A ``Dict`` of ``Box`` spaces.
+    """
+
+    def __init__(self, observation_space: spaces.Dict) -> None:
+        if not isinstance(observation_space, spaces.Dict):
+            raise ValueError(f"DictFlattenExtractor needs a Dict observation space, got {observation_space}.")
+        bad = {k: type(s).__name__ for k, s in observation_space.spaces.items() if not isinstance(s, spaces.Box)}
+        if bad:
+            raise ValueError(
+                f"Unsupported observation space: Dict entries {bad} are not Box spaces. Wrap the env with "
+                "gymnasium.wrappers.FlattenObservation or pass another features_extractor_class."
+            )
+        super().__init__(observation_space, get_flattened_obs_dim(observation_space))
+        self.keys = list(observation_space.spaces.keys())
+
+    def forward(self, observations: dict[str, th.Tensor]) -> th.Tensor:  # type: ignore[override]
+        batch_size = observations[self.keys[0]].shape[0]
+        return th.cat([observations[key].reshape(batch_size, -1).float() for key in self.keys], dim=1)
+
+
+class DiscretizedPolicy(BasePolicy):
+    """
+    Categorical MLP policy over discretized ``Box`` actions (or native ``Discrete`` actions), with an
+    optional value network used as a baseline.
+
+    The policy's distribution works on *action indices*: for a joint policy one integer in
+    ``[0, n_bins ** action_dim)`` per observation (the last dimension varies fastest, as
+    ``itertools.product``), for a factorized one an integer in ``[0, n_bins)`` per dimension.
+    :meth:`indices_to_actions` turns them into env actions; ``predict()`` does it for you.
+
+    :param observation_space: Observation space (``Box``, or ``Dict`` of ``Box``, flattened and concatenated).
+    :param action_space: ``Box`` with finite bounds (discretized) or ``Discrete``.
+    :param lr_schedule: Learning rate schedule; the optimizer starts with ``lr_schedule(1)``.
+    :param n_bins: Number of evenly spaced levels per ``Box`` dimension, ``low`` and ``high`` included
+        (ignored for ``Discrete`` actions).
+    :param joint: ``True``: one categorical over the ``n_bins ** action_dim`` combinations of levels;
+        ``False``: an independent categorical per dimension.
+    :param max_joint_actions: Largest number of joint actions accepted when ``joint=True``.
+    :param net_arch: Hidden layer sizes of the policy network (default ``[64, 64]``).
+    :param activation_fn: Activation function of the hidden layers.
+    :param use_baseline: Add a separate value network (state-value baseline).
+    :param value_net_arch: Hidden layer sizes of the value network (default: ``net_arch``).
+    :param ortho_init: Orthogonal initialization as in SB3's A2C/PPO (gain 0.01 on the logits, so the
+        initial policy is close to uniform over the levels).
+    :param features_extractor_class: Features extractor; defaults to ``FlattenExtractor`` for ``Box``
+        observations and :class:`DictFlattenExtractor` for ``Dict`` observations. It is shared by the
+        policy and the value network.
+    :param features_extractor_kwargs: Keyword arguments for the features extractor.
+    :param normalize_images: Whether to divide image observations by 255.
+    :param optimizer_class: Optimizer class (Adam by default).
+    :param optimizer_kwargs: Keyword arguments for the optimizer, except the learning rate.
+    """
+
+    action_levels: th.Tensor
+    joint_strides: th.Tensor
+
+    def __init__(
+        self,
+        observation_space: spaces.Space,
+        action_space: spaces.Space,
+        lr_schedule: Schedule,
+        n_bins: int = 3,
+        joint: bool = False,
+        max_joint_actions: int = MAX_JOINT_ACTIONS,
+        net_arch: list[int] | None = None,
+        activation_fn: type[nn.Module] = nn.Tanh,
+        use_baseline: bool = False,
+        value_net_arch: list[int] | None = None,
+        ortho_init: bool = True,
+        features_extractor_class: type[BaseFeaturesExtractor] | None = None,
+        features_extractor_kwargs: dict[str, Any] | None = None,
+        normalize_images: bool = True,
+        optimizer_class: type[th.optim.Optimizer] = th.optim.Adam,
+        optimizer_kwargs: dict[str, Any] | None = None,
+    ) -> None:
+        check_action_space(action_space)
+        if int(n_bins) != n_bins or n_bins < 2:
+            raise ValueError(f"n_bins={n_bins}: it must be an integer >= 2 (levels per action dimension).")
+        if features_extractor_class is None:
+            if isinstance(observation_space, spaces.Dict):
+                features_extractor_class = DictFlattenExtractor
+            else:
+                features_extractor_class = FlattenExtractor
+        super().__init__(
+            observation_space,
+            action_space,
+            features_extractor_class=features_extractor_class,
+            features_extractor_kwargs=features_extractor_kwargs,
+            normalize_images=normalize_images,
+            optimizer_class=optimizer_class,
+            optimizer_kwargs=optimizer_kwargs,
+            squash_output=False,
+        )
+        self.n_bins = int(n_bins)
+        self.joint = bool(joint)
+        self.max_joint_actions = int(max_joint_actions)
+        self.net_arch = [64, 64] if net_arch is None else [int(n) for n in net_arch]
+        self.value_net_arch = None if value_net_arch is None else [int(n) for n in value_net_arch]
+        if any(n <= 0 for n in self.net_arch + (self.value_net_arch or [])):
+            raise ValueError(f"net_arch={net_arch}, value_net_arch={value_net_arch}: layer sizes must be positive.")
+        self.activation_fn = activation_fn
+        self.use_baseline = bool(use_baseline)
+        self.ortho_init = ortho_init
+
+        self.action_dist: CategoricalDistribution | MultiCategoricalDistribution
+        if isinstance(action_space, spaces.Discrete):
+            self.action_dim = 1
+            self.n_actions = int(action_space.n)
+            self.action_dist = CategoricalDistribution(self.n_actions)
+            levels = np.zeros((0, self.n_bins), dtype=np.float32)
+        else:
+            assert isinstance(action_space, spaces.Box)
+            self.action_dim = int(np.prod(action_space.shape))
+            low = action_space.low.reshape(-1).astype(np.float64)
+            high = action_space.high.reshape(-1).astype(np.float64)
+            # linspace puts low and high exactly on the grid: actions never leave the Box.
+            levels = np.linspace(low, high, self.n_bins, axis=1).astype(action_space.dtype)
+            if self.joint:
+                self.n_actions = self.n_bins**self.action_dim
+                if self.n_actions > self.max_joint_actions:
+                    raise ValueError(
+                        f"A joint categorical over {self.action_dim} action dimensions with n_bins={self.n_bins} "
+                        f"has {self.n_bins}**{self.action_dim} = {self.n_actions} actions, more than "
+                        f"max_joint_actions={self.max_joint_actions}. Use the factorized form "
+                        "(policy_kwargs=dict(joint=False)), fewer bins, or raise max_joint_actions."
+                    )
+                self.action_dist = CategoricalDistribution(self.n_actions)
+            else:
+                self.n_actions = self.n_bins * self.action_dim
+                self.action_dist = MultiCategoricalDistribution([self.n_bins] * self.action_dim)
+        # Level values, (action_dim, n_bins): derived from the action space, so not saved in the state dict.
+        self.register_buffer("action_levels", th.as_tensor(levels), persistent=False)
+        # Strides that turn a joint index into per-dimension indices (last dimension fastest).
+        strides = [self.n_bins ** (self.action_dim - 1 - d) for d in range(self.action_dim)] if self.joint else []
+        self.register_buffer("joint_strides", th.as_tensor(strides, dtype=th.long), persistent=False)
+        self._build(lr_schedule)
+
+    def _build(self, lr_schedule: Schedule) -> None:
+        """
+        Create the networks and the optimizer.
+
+        :param lr_schedule: Learning rate schedule; the optimizer starts with ``lr_schedule(1)``.
+        """
+        self.features_extractor = self.make_features_extractor()
+        features_dim = self.features_extractor.features_dim
+        self.policy_net = nn.Sequential(*create_mlp(features_dim, -1, self.net_arch, self.activation_fn))
+        latent_dim = self.net_arch[-1] if self.net_arch else features_dim
+        self.action_net = self.action_dist.proba_distribution_net(latent_dim)
+        self.value_net: nn.Sequential | None = None
+        if self.use_baseline:
+            value_arch = self.net_arch if self.value_net_arch is None else self.value_net_arch
+            self.value_net = nn.Sequential(*create_mlp(features_dim, 1, value_arch, self.activation_fn))
+        if self.ortho_init:
+            self.policy_net.apply(lambda m: self.init_weights(m, gain=float(np.sqrt(2))))
+            self.action_net.apply(lambda m: self.init_weights(m, gain=0.01))
+            if self.value_net is not None:
+                self.value_net.apply(lambda m: self.init_weights(m, gain=float(np.sqrt(2))))
+                self.init_weights(self.value_net[-1], gain=1.0)
+        self.optimizer = self.optimizer_class(
+            self.parameters(),
+            lr=lr_schedule(1),  # type: ignore[call-arg]
+            **self.optimizer_kwargs,
+        )
+
+    def _get_constructor_parameters(self) -> dict[str, Any]:
+        data = super()._get_constructor_parameters()
+        data.update(
+            dict(
+                lr_schedule=self._dummy_schedule,  # the algorithm rebuilds the real one when loading
+                n_bins=self.n_bins,
+                joint=self.joint,
+                max_joint_actions=self.max_joint_actions,
+                net_arch=self.net_arch,
+                activation_fn=self.activation_fn,
+                use_baseline=self.use_baseline,
+                value_net_arch=self.value_net_arch,
+                ortho_init=self.ortho_init,
+                features_extractor_class=self.features_extractor_class,
+                features_extractor_kwargs=self.features_extractor_kwargs,
+                optimizer_class=self.optimizer_class,
+                optimizer_kwargs=self.optimizer_kwargs,
+            )
+        )
+        return data
+
+    # ------------------------------------------------------------------ distribution
+    def get_distribution(self, obs: PyTorchObs) -> CategoricalDistribution | MultiCategoricalDistribution:
+        """
+        :param obs: Batch of observations (tensor, or dict of tensors).
+        :return: The action distribution over indices for these observations.
+        """
+        features = self.extract_features(obs, self.features_extractor)
+        logits = self.action_net(self.policy_net(features))
+        return self.action_dist.proba_distribution(logits)
+
+    def forward(self, obs: PyTorchObs, deterministic: bool = False, generator: th.Generator | None = None) -> th.Tensor:
+        """
+        Choose action indices (use :meth:`indices_to_actions` to get env actions).
+
+        :param obs: Batch of observations.
+        :param deterministic: Take the mode of the distribution instead of sampling.
+        :param generator: Torch random generator to sample from (``None``: the global one).
+        :return: Indices: ``(batch,)`` for a joint or ``Discrete`` policy, ``(batch, action_dim)`` for a
+            factorized one.
+        """
+        distribution = self.get_distribution(obs)
+        if deterministic or generator is None:
+            return distribution.get_actions(deterministic=deterministic)
+        if isinstance(distribution, MultiCategoricalDistribution):
+            return th.stack(
+                [th.multinomial(d.probs, 1, generator=generator).squeeze(1) for d in distribution.distribution],
+                dim=1,
+            )
+        return th.multinomial(distribution.distribution.probs, 1, generator=generator).squeeze(1)
+
+    def indices_to_actions(self, indices: th.Tensor) -> th.Tensor:
+        """
+        Map action indices to env actions.
+
+        :param indices: Output of :meth:`forward`.
+        :return: ``Box``: the levels, ``(batch, action_dim)``; ``Discrete``: the indices themselves.
+        """
+        if isinstance(self.action_space, spaces.Discrete):
+            return indices + int(self.action_space.start)
+        if self.joint:
+            per_dim = (indices.long().unsqueeze(1) // self.joint_strides) % self.n_bins
+        else:
+            per_dim = indices.long()
+        # action_levels[d, per_dim[b, d]]
+        return th.gather(self.action_levels.expand(per_dim.shape[0], -1, -1), 2, per_dim.unsqueeze(2)).squeeze(2)
+
+    def _predict(self, observation: PyTorchObs, deterministic: bool = False) -> th.Tensor:
+        return self.indices_to_actions(self(observation, deterministic=deterministic))
+
+    def evaluate_actions(self, obs: PyTorchObs, indices: th.Tensor) -> tuple[th.Tensor, th.Tensor, th.Tensor | None]:
+        """
+        Log-probabilities and entropy of taken actions, and the baseline values.
+
+        :param obs: Batch of observations.
+        :param indices: Action indices taken in these observations.
+        :return: ``log_prob`` ``(batch,)``, ``entropy`` ``(batch,)`` and values ``(batch,)`` (``None``
+            without a baseline).
+        """
+        features = self.extract_features(obs, self.features_extractor)
+        distribution = self.action_dist.proba_distribution(self.action_net(self.policy_net(features)))
+        values = None if self.value_net is None else self.value_net(features).squeeze(1)
+        return distribution.log_prob(indices), distribution.entropy(), values
+
+    def predict_values(self, obs: PyTorchObs) -> th.Tensor:
+        """
+        :param obs: Batch of observations.
+        :return: The baseline's state values ``(batch,)``.
+        """
+        if self.value_net is None:
+            raise ValueError("This policy has no value network: create it with use_baseline=True.")
+        return self.value_net(self.extract_features(obs, self.features_extractor)).squeeze(1)
+
+
+def check_action_space(action_space: spaces.Space) -> None:
+    """
+    Raise a clear ``ValueError`` for an action space that :class:`DiscretizedPolicy` does not support.
+
+    :param action_space: The env's action space.
+    """
+    if isinstance(action_space, spaces.Discrete):
+        return
+    if isinstance(action_space, spaces.Box):
+        if not (np.all(np.isfinite(action_space.low)) and np.all(np.isfinite(action_space.high))):
+            raise ValueError(
+                f"Unsupported action space {action_space}: the Box bounds must be finite to be discretized."
+            )
+        return
+    raise ValueError(
+        f"Unsupported action space {action_space}: REINFORCE supports Box actions (discretized into n_bins "
+        "levels per dimension) and Discrete actions. Wrap the env to expose a Box or Discrete space "
+        "(MultiDiscrete, MultiBinary, Tuple and Dict action spaces are not supported)."
+    )
+
+
+#: Alias for SB3's policy names.
+MlpPolicy = DiscretizedPolicy
+#: Alias for ``Dict`` observations (they are flattened by :class:`DictFlattenExtractor`).
+MultiInputPolicy = DiscretizedPolicy

@@ -1,0 +1,370 @@
+"""REINFORCE (Williams, 1992) with discretized actions, as an SB3 algorithm."""
+
+from __future__ import annotations
+
+import sys
+import time
+import warnings
+from dataclasses import dataclass
+from typing import Any, ClassVar, TypeVar
+
+import numpy as np
+import torch as th
+from stable_baselines3.common.base_class import BaseAlgorithm
+from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.policies import BasePolicy
+from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
+from stable_baselines3.common.utils import obs_as_tensor, safe_mean
+from stable_baselines3.common.vec_env import VecEnv
+from torch.nn import functional as F
+
+from sb3_es.common.population_algorithm import check_positive
+from sb3_es.reinforce.policies import DiscretizedPolicy, MlpPolicy, MultiInputPolicy, check_action_space
+
+SelfREINFORCE = TypeVar("SelfREINFORCE", bound="REINFORCE")
+
+#: Added to the standard deviation when normalizing returns.
+RETURN_NORM_EPS = 1e-8
+
+
+@dataclass
+class EpisodeBatch:
+    """
+    The transitions of the complete episodes collected for one update, flattened over time and env slots.
+
+    :param observations: Observations ``(n_steps, ...)`` (a dict of arrays for ``Dict`` spaces).
+    :param indices: Action indices taken (what the policy's distribution sampled).
+    :param returns: Discounted returns-to-go ``G_t`` (not normalized).
+    :param episode_returns: Undiscounted return of each episode in the batch.
+    """
+
+    observations: np.ndarray | dict[str, np.ndarray]
+    indices: np.ndarray
+    returns: np.ndarray
+    episode_returns: np.ndarray
+
+
+class REINFORCE(BaseAlgorithm):
+    """
+    REINFORCE, the Monte-Carlo policy gradient (Williams, 1992), with discretized actions.
+
+    Each update collects ``n_episodes`` complete episodes with the current stochastic policy, computes
+    the discounted returns-to-go ``G_t``, normalizes them across the batch (``normalize_returns``), and
+    takes one optimizer step on ``-mean_t[(G_t - b(s_t)) log pi(a_t | s_t)]`` over all the steps of the
+    batch. ``Box`` actions are discretized by :class:`~sb3_es.reinforce.policies.DiscretizedPolicy`
+    into ``n_bins`` levels per dimension (joint or factorized categorical, see ``policy_kwargs``).
+
+    Episode collection: the ``n_episodes`` episodes are split in advance between the VecEnv's slots
+    (slot ``i`` contributes ``n_episodes // n_envs`` episodes, plus one if ``i < n_episodes % n_envs``)
+    and every slot runs its episodes in parallel. A slot that has finished its share keeps stepping (a
+    VecEnv steps all slots together) and the episodes it plays then are *discarded*, as is any episode
+    still running when the last needed one ends: fixing the episodes in advance avoids the bias towards
+    short episodes of "the first ``n_episodes`` to finish". Every env step counts in ``num_timesteps``
+    (``+= n_envs`` per vec step), discarded ones included, and their Monitor statistics still go to
+    ``rollout/ep_rew_mean``. Use ``n_episodes`` a multiple of ``n_envs`` to waste few steps.
+
+    Each update starts with ``env.seed(s)`` and ``env.reset()``, and samples its actions from a torch
+    generator seeded with ``s'``, where ``s, s'`` come from a random generator stored in the model
+    (seeded by ``seed``) and saved with it. Training is therefore reproducible for a fixed ``seed``
+    (with ``DummyVecEnv``), and ``learn(n)``, ``save``, ``load``, ``learn(n, reset_num_timesteps=False)``
+    ends with the same parameters as ``learn(2 * n)``. Episodes cut by a time limit are treated like
+    terminated ones (no bootstrapping), as in the original algorithm.
+
+    :param policy: ``"MlpPolicy"``, ``"MultiInputPolicy"`` or a :class:`DiscretizedPolicy` class.
+    :param env: Environment, env id or VecEnv (its slots collect episodes in parallel).
+    :param learning_rate: Adam learning rate, a float or a schedule of the remaining progress.
+    :param n_episodes: Complete episodes per update.
+    :param gamma: Discount factor in ``[0, 1]``.
+    :param normalize_returns: Normalize the discounted returns to zero mean and unit standard deviation
+        across all the steps of the batch (as in the classic REINFORCE/CartPole recipe). With
+        ``use_baseline``, the value network learns the (normalized) returns and is subtracted from them.
+    :param use_baseline: Subtract a learned state value ``b(s_t)`` (a separate MLP, trained jointly by
+        regression on the returns) from the returns.
+    :param ent_coef: Entropy bonus coefficient (0 is plain REINFORCE).
+    :param max_grad_norm: Clip the gradient norm to this value (``None``: no clipping).
+    :param policy_kwargs: Keyword arguments for the policy: ``n_bins`` (levels per dimension, default 3),
+        ``joint`` (joint categorical over all combinations instead of one per dimension), ``net_arch``,
+        ``activation_fn``, ``value_net_arch``, ``optimizer_class``, ...
+    :param stats_window_size: Number of episodes averaged in ``rollout/ep_rew_mean``.
+    :param tensorboard_log: TensorBoard log directory.
+    :param seed: Seed for the policy initialization, the environments and the action sampling.
+    :param verbose: 0 none, 1 training information, 2 debug.
+    :param device: Torch device (``"auto"``: CUDA if available). Small MLPs run best on the CPU.
+    :param _init_setup_model: Whether to build the model at construction.
+    """
+
+    policy_aliases: ClassVar[dict[str, type[BasePolicy]]] = {
+        "MlpPolicy": MlpPolicy,
+        "MultiInputPolicy": MultiInputPolicy,
+    }
+    policy: DiscretizedPolicy
+
+    def __init__(
+        self,
+        policy: str | type[DiscretizedPolicy],
+        env: GymEnv | str | None,
+        learning_rate: float | Schedule = 1e-2,
+        n_episodes: int = 10,
+        gamma: float = 0.99,
+        normalize_returns: bool = True,
+        use_baseline: bool = False,
+        ent_coef: float = 0.0,
+        max_grad_norm: float | None = None,
+        policy_kwargs: dict[str, Any] | None = None,
+        stats_window_size: int = 100,
+        tensorboard_log: str | None = None,
+        seed: int | None = None,
+        verbose: int = 0,
+        device: th.device | str = "auto",
+        _init_setup_model: bool = True,
+    ) -> None:
+        if int(n_episodes) != n_episodes or n_episodes < 1:
+            raise ValueError(f"n_episodes={n_episodes}: it must be a positive integer (episodes per update).")
+        if not 0.0 <= gamma <= 1.0:
+            raise ValueError(f"gamma={gamma}: the discount factor must be in [0, 1].")
+        if max_grad_norm is not None and not max_grad_norm > 0:
+            raise ValueError(f"max_grad_norm={max_grad_norm}: it must be a positive number or None.")
+        if not np.isfinite(ent_coef):
+            raise ValueError(f"ent_coef={ent_coef}: it must be a finite number.")
+        check_positive("learning_rate", learning_rate)
+        if policy_kwargs is not None and "use_baseline" in policy_kwargs:
+            raise ValueError("Pass use_baseline to REINFORCE, not in policy_kwargs.")
+        if env is not None and not isinstance(env, str) and hasattr(env, "action_space"):
+            check_action_space(env.action_space)
+        if isinstance(policy, str):
+            # Resolve aliases here: SB3 rejects "MlpPolicy" for Dict observations, which this policy flattens.
+            policy = self._get_policy_from_name(policy)  # type: ignore[assignment]
+        super().__init__(
+            policy,
+            env,
+            learning_rate=learning_rate,
+            policy_kwargs=policy_kwargs,
+            stats_window_size=stats_window_size,
+            tensorboard_log=tensorboard_log,
+            verbose=verbose,
+            device=device,
+            support_multi_env=True,
+            seed=seed,
+        )
+        if self.env is not None:
+            check_action_space(self.action_space)
+        self.n_episodes = int(n_episodes)
+        self.gamma = float(gamma)
+        self.normalize_returns = normalize_returns
+        self.use_baseline = use_baseline
+        self.ent_coef = float(ent_coef)
+        self.max_grad_norm = max_grad_norm
+        #: Random generator of the per-update env and sampling seeds (saved with the model).
+        self._rng: np.random.Generator | None = None
+        if _init_setup_model:
+            self._setup_model()
+
+    # ------------------------------------------------------------------ model
+    def _setup_model(self) -> None:
+        self._setup_lr_schedule()
+        self.set_random_seed(self.seed)
+        policy = self.policy_class(  # type: ignore[assignment]
+            self.observation_space,
+            self.action_space,
+            self.lr_schedule,
+            use_baseline=self.use_baseline,
+            **self.policy_kwargs,
+        )
+        if not isinstance(policy, DiscretizedPolicy):
+            raise TypeError(f"REINFORCE needs a DiscretizedPolicy subclass, got {type(policy).__name__}.")
+        self.policy = policy.to(self.device)
+        if self._rng is None:  # a loaded model brings its own generator (and its state)
+            self._rng = np.random.default_rng(self.seed)
+
+    def _get_torch_save_params(self) -> tuple[list[str], list[str]]:
+        return ["policy", "policy.optimizer"], []
+
+    # ------------------------------------------------------------------ training
+    def learn(
+        self: SelfREINFORCE,
+        total_timesteps: int,
+        callback: MaybeCallback = None,
+        log_interval: int = 1,
+        tb_log_name: str = "REINFORCE",
+        reset_num_timesteps: bool = True,
+        progress_bar: bool = False,
+    ) -> SelfREINFORCE:
+        """
+        Train for at least ``total_timesteps`` env steps (the last update always completes its episodes).
+
+        :param total_timesteps: Env steps to train for.
+        :param callback: Callback(s) called at every vec step; returning False stops training at once
+            (the episodes of the interrupted update are discarded, the parameters are those of the last update).
+        :param log_interval: Number of updates between two log dumps.
+        :param tb_log_name: Name of the TensorBoard run.
+        :param reset_num_timesteps: Whether to reset ``num_timesteps`` (False to continue a run).
+        :param progress_bar: Display a progress bar (tqdm and rich).
+        :return: The trained model.
+        """
+        iteration = 0
+        total_timesteps, callback = self._setup_learn(
+            total_timesteps, callback, reset_num_timesteps, tb_log_name, progress_bar
+        )
+        callback.on_training_start(locals(), globals())
+        if self.env is None:
+            raise ValueError("This model has no environment: pass env= to load() or call set_env() before learn().")
+        if self.n_episodes < self.env.num_envs:
+            warnings.warn(
+                f"n_episodes={self.n_episodes} < n_envs={self.env.num_envs}: some env slots collect no episode "
+                "and their steps are wasted (they still count in num_timesteps).",
+                stacklevel=2,
+            )
+        while self.num_timesteps < total_timesteps:
+            batch = self.collect_episodes(self.env, callback)
+            if batch is None:
+                break
+            iteration += 1
+            self._update_current_progress_remaining(self.num_timesteps, total_timesteps)
+            self.train(batch)
+            if log_interval is not None and iteration % log_interval == 0:
+                self.dump_logs(iteration)
+        callback.on_training_end()
+        return self
+
+    def collect_episodes(self, env: VecEnv, callback: BaseCallback) -> EpisodeBatch | None:
+        """
+        Collect ``n_episodes`` complete episodes with the current policy (see the class docstring).
+
+        :param env: The training VecEnv.
+        :param callback: Callback called once per vec step.
+        :return: The batch, or ``None`` if a callback stopped training.
+        """
+        assert self._rng is not None
+        n_envs = env.num_envs
+        quotas = np.array([self.n_episodes // n_envs + (i < self.n_episodes % n_envs) for i in range(n_envs)])
+        env_seed, sample_seed = (int(s) for s in self._rng.integers(2**31 - 1 - n_envs, size=2))
+        generator = th.Generator(device=self.device)
+        generator.manual_seed(sample_seed)
+        env.seed(env_seed)
+        obs = env.reset()
+        self.policy.set_training_mode(False)
+        callback.on_rollout_start()
+
+        finished = np.zeros(n_envs, dtype=np.int64)
+        ep_return = np.zeros(n_envs)
+        ep_length = np.zeros(n_envs, dtype=np.int64)
+        obs_buf: list[Any] = []
+        idx_buf: list[np.ndarray] = []
+        rew_buf: list[np.ndarray] = []
+        done_buf: list[np.ndarray] = []
+        keep_buf: list[np.ndarray] = []
+        kept_returns: list[float] = []
+        while np.any(finished < quotas):
+            with th.no_grad():
+                indices = self.policy(obs_as_tensor(obs, self.device), generator=generator)  # type: ignore[arg-type]
+                actions = self.policy.indices_to_actions(indices).cpu().numpy()
+            actions = actions.reshape((n_envs, *self.action_space.shape))  # type: ignore[misc]
+            new_obs, rewards, dones, infos = env.step(actions)
+            self.num_timesteps += n_envs
+            callback.update_locals(locals())
+            if not callback.on_step():
+                return None
+            self._update_info_buffer(infos, dones)
+
+            keep = finished < quotas
+            obs_buf.append(obs)
+            idx_buf.append(indices.cpu().numpy())
+            rew_buf.append(np.asarray(rewards, dtype=np.float64))
+            done_buf.append(np.asarray(dones, dtype=bool))
+            keep_buf.append(keep)
+            ep_return += rewards
+            ep_length += 1
+            fallback_infos = []
+            for i in np.flatnonzero(dones):
+                if "episode" not in infos[i]:  # no Monitor: report what was measured here
+                    fallback_infos.append({"episode": {"r": float(ep_return[i]), "l": int(ep_length[i])}})
+                if keep[i]:
+                    kept_returns.append(float(ep_return[i]))
+                ep_return[i] = 0.0
+                ep_length[i] = 0
+            if fallback_infos:
+                self._update_info_buffer(fallback_infos)
+            finished += dones
+            obs = new_obs
+
+        callback.on_rollout_end()
+
+        rewards_tn = np.stack(rew_buf)
+        dones_tn = np.stack(done_buf)
+        keep_tn = np.stack(keep_buf)
+        returns_tn = np.zeros_like(rewards_tn)
+        running = np.zeros(n_envs)
+        for t in reversed(range(len(rew_buf))):
+            running = rewards_tn[t] + self.gamma * running * (1.0 - dones_tn[t])
+            returns_tn[t] = running
+        if isinstance(obs_buf[0], dict):
+            observations: np.ndarray | dict[str, np.ndarray] = {
+                key: np.stack([o[key] for o in obs_buf])[keep_tn] for key in obs_buf[0]
+            }
+        else:
+            observations = np.stack(obs_buf)[keep_tn]
+        return EpisodeBatch(
+            observations=observations,
+            indices=np.stack(idx_buf)[keep_tn],
+            returns=returns_tn[keep_tn],
+            episode_returns=np.array(kept_returns),
+        )
+
+    def train(self, batch: EpisodeBatch) -> None:  # type: ignore[override]
+        """
+        One policy-gradient step (and value regression with a baseline) on a batch of episodes.
+
+        :param batch: Episodes from :meth:`collect_episodes`.
+        """
+        self.policy.set_training_mode(True)
+        self._update_learning_rate(self.policy.optimizer)
+        obs = obs_as_tensor(batch.observations, self.device)
+        indices = th.as_tensor(batch.indices, device=self.device)
+        returns = th.as_tensor(batch.returns, dtype=th.float32, device=self.device)
+        if self.normalize_returns:
+            returns = (returns - returns.mean()) / (returns.std(unbiased=False) + RETURN_NORM_EPS)
+
+        log_prob, entropy, values = self.policy.evaluate_actions(obs, indices)  # type: ignore[arg-type]
+        advantages = returns if values is None else returns - values.detach()
+        policy_loss = -(advantages * log_prob).mean()
+        entropy_mean = entropy.mean()
+        loss = policy_loss - self.ent_coef * entropy_mean
+        if values is not None:
+            value_loss = F.mse_loss(values, returns)
+            loss = loss + value_loss
+            self.logger.record("train/value_loss", value_loss.item())
+
+        self.policy.optimizer.zero_grad()
+        loss.backward()
+        if self.max_grad_norm is not None:
+            grad_norm = th.nn.utils.clip_grad_norm_(self.policy.parameters(), self.max_grad_norm)
+            self.logger.record("train/grad_norm", grad_norm.item())
+        self.policy.optimizer.step()
+        self._n_updates += 1
+
+        self.logger.record("train/policy_loss", policy_loss.item())
+        self.logger.record("train/entropy", entropy_mean.item())
+        self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
+        self.logger.record("train/n_steps", len(batch.returns))
+        self.logger.record("rollout/batch_ep_rew_mean", float(np.mean(batch.episode_returns)))
+
+    def dump_logs(self, iteration: int = 0) -> None:
+        """
+        Write the SB3 ``rollout/`` and ``time/`` keys and dump the logger.
+
+        :param iteration: Number of updates since the start of this ``learn()`` call.
+        """
+        assert self.ep_info_buffer is not None and self.ep_success_buffer is not None
+        time_elapsed = max((time.time_ns() - self.start_time) / 1e9, sys.float_info.epsilon)
+        fps = int((self.num_timesteps - self._num_timesteps_at_start) / time_elapsed)
+        if iteration > 0:
+            self.logger.record("time/iterations", iteration, exclude="tensorboard")
+        if len(self.ep_info_buffer) > 0:
+            self.logger.record("rollout/ep_rew_mean", safe_mean([info["r"] for info in self.ep_info_buffer]))
+            self.logger.record("rollout/ep_len_mean", safe_mean([info["l"] for info in self.ep_info_buffer]))
+        if len(self.ep_success_buffer) > 0:
+            self.logger.record("rollout/success_rate", safe_mean(self.ep_success_buffer))
+        self.logger.record("time/fps", fps)
+        self.logger.record("time/time_elapsed", int(time_elapsed), exclude="tensorboard")
+        self.logger.record("time/total_timesteps", self.num_timesteps, exclude="tensorboard")
+        self.logger.dump(step=self.num_timesteps)
