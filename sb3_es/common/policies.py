@@ -195,16 +195,12 @@ class FlatPolicy(BasePolicy):
 
     def normalize(self, flat_obs: np.ndarray) -> np.ndarray:
         """
-        Apply the (frozen) running observation statistics.
+        Apply the running observation statistics (as :meth:`population_forward` does).
 
         :param flat_obs: Flattened observations ``(n, obs_dim)``.
         :return: Normalized observations, float32.
         """
-        if not self.normalize_observations:
-            return flat_obs
-        mean = self.obs_mean.cpu().numpy()
-        std = np.sqrt(self.obs_var.cpu().numpy() + OBS_NORM_EPS)
-        return ((flat_obs - mean) / std).astype(np.float32)
+        return self.population_forward().normalize(flat_obs)
 
     def obs_rms(self) -> RunningMeanStd:
         """:return: A copy of the observation statistics as an SB3 ``RunningMeanStd``."""
@@ -259,20 +255,13 @@ class FlatPolicy(BasePolicy):
                 x = _apply_elementwise(module, x)
         return x[:, :, 0]
 
-    def _postprocess(self, out: np.ndarray) -> np.ndarray:
+    def population_forward(self) -> PopulationForward:
         """
-        Network outputs to env actions, as ``predict()`` does: argmax, or tanh-rescale / clip to the Box.
+        The batched forward pass with the current observation statistics frozen (one per generation).
 
-        :param out: Raw outputs ``(k, output_dim)``.
-        :return: Env actions.
+        :return: A callable ``(params, flat_obs) -> env actions``.
         """
-        if isinstance(self.action_space, spaces.Discrete):
-            return out.argmax(axis=1)
-        assert isinstance(self.action_space, spaces.Box)
-        actions = out.reshape((-1, *self.action_space.shape))
-        if self.squash_output:
-            return self.unscale_action(actions)
-        return np.clip(actions, self.action_space.low, self.action_space.high)
+        return PopulationForward(self)
 
     def population_actions(self, params: np.ndarray, flat_obs: np.ndarray) -> np.ndarray:
         """
@@ -284,7 +273,7 @@ class FlatPolicy(BasePolicy):
         :param flat_obs: Flattened raw observations of the ``k`` slots (see :meth:`flatten_obs`).
         :return: Env actions ``(k, *action_shape)``.
         """
-        return self._postprocess(self._forward_numpy(params, self.normalize(flat_obs)))
+        return self.population_forward()(params, flat_obs)
 
     def forward(self, obs: PyTorchObs, deterministic: bool = True) -> th.Tensor:
         return self._predict(obs, deterministic)
@@ -300,6 +289,56 @@ class FlatPolicy(BasePolicy):
         if isinstance(self.action_space, spaces.Discrete):
             return th.as_tensor(out.argmax(axis=1))
         return th.as_tensor(out)
+
+
+class PopulationForward:
+    """
+    A policy's batched forward pass with its observation statistics and action scaling computed once.
+
+    The statistics are frozen while a generation is evaluated, so the evaluator builds one of these
+    per generation; ``predict()`` builds one per call. Both therefore compute identical actions.
+
+    :param policy: The policy.
+    """
+
+    def __init__(self, policy: FlatPolicy) -> None:
+        self.policy = policy
+        self.mean: np.ndarray | None = None
+        self.inv_std: np.ndarray | None = None
+        if policy.normalize_observations:
+            self.mean = policy.obs_mean.cpu().numpy().astype(np.float32)
+            self.inv_std = (1.0 / np.sqrt(policy.obs_var.cpu().numpy() + OBS_NORM_EPS)).astype(np.float32)
+        self.discrete = isinstance(policy.action_space, spaces.Discrete)
+        if not self.discrete:
+            assert isinstance(policy.action_space, spaces.Box)
+            self.shape = policy.action_space.shape
+            self.low = policy.action_space.low
+            self.high = policy.action_space.high
+            self.span = self.high - self.low
+
+    def normalize(self, flat_obs: np.ndarray) -> np.ndarray:
+        """
+        :param flat_obs: Flattened observations ``(n, obs_dim)``.
+        :return: Normalized observations, float32.
+        """
+        if self.mean is None or self.inv_std is None:
+            return flat_obs
+        return (flat_obs - self.mean) * self.inv_std
+
+    def __call__(self, params: np.ndarray, flat_obs: np.ndarray) -> np.ndarray:
+        """
+        :param params: Parameters ``(k, num_params)`` (or one row, broadcast), float32.
+        :param flat_obs: Flattened raw observations ``(k, obs_dim)``.
+        :return: Env actions: argmax for Discrete; for Box, tanh outputs rescaled to the bounds
+            (as SB3's ``unscale_action``) or raw outputs clipped to them.
+        """
+        out = self.policy._forward_numpy(params, self.normalize(flat_obs))
+        if self.discrete:
+            return out.argmax(axis=1)
+        actions = out.reshape((-1, *self.shape))
+        if self.policy.squash_output:
+            return self.low + (0.5 * (actions + 1.0) * self.span)
+        return np.clip(actions, self.low, self.high)
 
 
 _ELEMENTWISE: dict[type[nn.Module], Callable[[np.ndarray], np.ndarray]] = {

@@ -49,11 +49,14 @@ class VecEnvEvaluator(PopulationEvaluator):
         pending = deque((c, e) for e in range(n_episodes) for c in range(n_candidates))
         remaining = len(pending)
         slot_job: list[tuple[int, int] | None] = [None] * n_envs
+        active = np.zeros(n_envs, dtype=bool)  # slot runs a candidate (not the center policy)
         slot_params = np.repeat(center_params[None], n_envs, axis=0)
+        forward = policy.population_forward()  # observation statistics frozen for the generation
 
         def assign(slot: int) -> None:
             job = pending.popleft() if pending else None
             slot_job[slot] = job
+            active[slot] = job is not None
             slot_params[slot] = params[job[0]] if job is not None else center_params
 
         for slot in range(n_envs):
@@ -65,9 +68,8 @@ class VecEnvEvaluator(PopulationEvaluator):
 
         while remaining > 0:
             flat_obs = policy.flatten_obs(obs)  # type: ignore[arg-type]
-            active = np.array([job is not None for job in slot_job])
-            result.obs_stats.add(flat_obs[active])
-            actions = policy.population_actions(slot_params, flat_obs)
+            result.obs_stats.add(flat_obs if active.all() else flat_obs[active])
+            actions = forward(slot_params, flat_obs)
             obs, rewards, dones, infos = env.step(actions)
             result.n_steps += n_envs
             ep_return += rewards

@@ -1,0 +1,423 @@
+"""
+Env-step throughput of sb3-es ARS against sb3-contrib's ARS and a plain ``env.step`` loop.
+
+Command (about 3.5 minutes on 2 cores with the defaults, 4 with ``--profile``)::
+
+    python benchmarks/throughput.py
+
+Options: ``--seconds S`` (timed window of each measurement, default 8), ``--warmup S`` (default 1.5),
+``--quick`` (2 s windows, smoke test), ``--only bipedal|pendulum``, ``--torch-threads N``
+(``th.set_num_threads`` in the main process), ``--profile`` (also print where our engine spends its time per
+vec step).
+
+Every ARS measurement builds the model and its envs, warms up with a short ``learn()``, then times
+``learn(..., reset_num_timesteps=False)`` for a fixed wall time; steps are the difference of
+``model.num_timesteps``. A callback ends the timed window (per vec step; for sb3-contrib's
+``AsyncEval`` path, whose callbacks run after the generation, at the end of a generation). The plain
+loop runs ``env.step(env.action_space.sample())`` (with resets) in N processes for the same time and
+sums their rates. All ARS runs: ``MlpPolicy`` ([64, 64]), ``n_delta=8``, other hyperparameters default.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import multiprocessing as mp
+import os
+import platform
+import sys
+import time
+from collections import defaultdict
+from collections.abc import Callable
+from dataclasses import dataclass
+from functools import partial
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import sb3_contrib
+import stable_baselines3 as sb3
+import torch as th
+from sb3_contrib import ARS as ContribARS
+from sb3_contrib.common.vec_env import AsyncEval
+from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv
+
+import sb3_es
+from sb3_es import ARS
+from sb3_es.evaluation.base import ObsStats
+
+BIPEDAL = "BipedalWalker-v3"
+PENDULUM = "Pendulum-v1"
+N_DELTA = 8
+
+
+class _TimeUp(Exception):
+    """Raised by :class:`_Deadline` to end a timed ``learn()`` (sb3-contrib ignores ``on_step``'s result)."""
+
+
+class _Deadline(BaseCallback):
+    """
+    Stops ``learn()`` once ``seconds`` have passed, checked at every vec step or at the end of a generation.
+
+    :param seconds: Wall time allowed.
+    :param per_step: Check at every ``on_step`` (else only in ``on_rollout_end``).
+    """
+
+    def __init__(self, seconds: float, per_step: bool = True) -> None:
+        super().__init__()
+        self.deadline = time.perf_counter() + seconds
+        self.per_step = per_step
+
+    def _on_step(self) -> bool:
+        if self.per_step and time.perf_counter() >= self.deadline:
+            raise _TimeUp
+        return True
+
+    def _on_rollout_end(self) -> None:
+        if time.perf_counter() >= self.deadline:
+            raise _TimeUp
+
+
+@dataclass
+class Result:
+    """One measurement."""
+
+    env_id: str
+    name: str
+    config: str
+    steps: int
+    seconds: float
+    ep_len: float | None = None
+
+    @property
+    def rate(self) -> float:
+        return self.steps / self.seconds
+
+
+def _run_for(model: Any, seconds: float, per_step: bool = True, **learn_kwargs: Any) -> None:
+    with contextlib.suppress(_TimeUp):
+        model.learn(10**12, callback=_Deadline(seconds, per_step), reset_num_timesteps=False, **learn_kwargs)
+
+
+def _mean_ep_len(model: Any) -> float | None:
+    lengths = [info["l"] for info in model.ep_info_buffer or [] if "l" in info]
+    return float(np.mean(lengths)) if lengths else None
+
+
+def _time_model(
+    model: Any, env_id: str, name: str, config: str, seconds: float, warmup: float, per_step: bool = True, **kw: Any
+) -> Result:
+    _run_for(model, warmup, per_step, **kw)
+    start_steps = model.num_timesteps
+    start = time.perf_counter()
+    _run_for(model, seconds, per_step, **kw)
+    elapsed = time.perf_counter() - start
+    return Result(env_id, name, config, model.num_timesteps - start_steps, elapsed, _mean_ep_len(model))
+
+
+def measure_ours(env_id: str, n_envs: int, subproc: bool, seconds: float, warmup: float) -> Result:
+    vec_cls = SubprocVecEnv if subproc else DummyVecEnv
+    env = make_vec_env(env_id, n_envs=n_envs, seed=0, vec_env_cls=vec_cls)
+    try:
+        model = ARS("MlpPolicy", env, n_delta=N_DELTA, seed=0)
+        config = f"{vec_cls.__name__} n_envs={n_envs} ({n_envs if subproc else 1} proc)"
+        return _time_model(model, env_id, "sb3-es ARS", config, seconds, warmup)
+    finally:
+        env.close()
+
+
+def measure_contrib(env_id: str, n_workers: int, seconds: float, warmup: float) -> Result:
+    """sb3-contrib's ARS: single process (``n_workers=0``) or ``AsyncEval`` with ``n_workers`` processes."""
+    env = make_vec_env(env_id, n_envs=1, seed=0)
+    model = ContribARS("MlpPolicy", env, n_delta=N_DELTA, seed=0)
+    if n_workers == 0:
+        result = _time_model(model, env_id, "sb3-contrib ARS", "single process (DummyVecEnv n_envs=1)", seconds, warmup)
+        env.close()
+        return result
+    async_eval = AsyncEval([partial(make_vec_env, env_id, n_envs=1) for _ in range(n_workers)], model.policy)
+    try:
+        async_eval.seed(0)  # blocks until the workers have built their envs
+        config = f"AsyncEval {n_workers} workers ({n_workers} proc)"
+        return _time_model(
+            model, env_id, "sb3-contrib ARS", config, seconds, warmup, per_step=False, async_eval=async_eval
+        )
+    finally:
+        async_eval.close()
+        env.close()
+
+
+def _plain_worker(env_id: str, seconds: float, warmup: float, seed: int, barrier: Any, queue: Any) -> None:
+    env = gym.make(env_id)
+    env.reset(seed=seed)
+    env.action_space.seed(seed)
+
+    def loop(duration: float) -> tuple[int, int, float]:
+        steps = episodes = 0
+        start = time.perf_counter()
+        end = start + duration
+        while time.perf_counter() < end:
+            for _ in range(100):
+                _, _, terminated, truncated, _ = env.step(env.action_space.sample())
+                steps += 1
+                if terminated or truncated:
+                    episodes += 1
+                    env.reset()
+        return steps, episodes, time.perf_counter() - start
+
+    loop(warmup)
+    barrier.wait()
+    queue.put(loop(seconds))
+    env.close()
+
+
+def measure_plain(env_id: str, n_procs: int, seconds: float, warmup: float) -> Result:
+    ctx = mp.get_context("forkserver" if "forkserver" in mp.get_all_start_methods() else "spawn")
+    barrier, queue = ctx.Barrier(n_procs), ctx.Queue()
+    procs = [
+        ctx.Process(target=_plain_worker, args=(env_id, seconds, warmup, i, barrier, queue)) for i in range(n_procs)
+    ]
+    for proc in procs:
+        proc.start()
+    outs = [queue.get() for _ in procs]
+    for proc in procs:
+        proc.join()
+    rate = sum(steps / elapsed for steps, _, elapsed in outs)
+    elapsed = max(out[2] for out in outs)
+    steps, episodes = sum(out[0] for out in outs), sum(out[1] for out in outs)
+    return Result(
+        env_id,
+        "plain step loop",
+        f"{n_procs} proc, gym.make + action_space.sample()",
+        round(rate * elapsed),
+        elapsed,
+        steps / episodes if episodes else None,
+    )
+
+
+# ---------------------------------------------------------------------------------------------- profile
+class _EnvTimer(gym.Wrapper):
+    """Accumulates the time spent inside the wrapped env (step and reset, Monitor included)."""
+
+    def __init__(self, env: gym.Env) -> None:
+        super().__init__(env)
+        self.busy = 0.0
+
+    def step(self, action: Any) -> Any:
+        start = time.perf_counter()
+        try:
+            return self.env.step(action)
+        finally:
+            self.busy += time.perf_counter() - start
+
+    def reset(self, **kwargs: Any) -> Any:
+        start = time.perf_counter()
+        try:
+            return self.env.reset(**kwargs)
+        finally:
+            self.busy += time.perf_counter() - start
+
+
+def profile_ours(env_id: str, n_envs: int, subproc: bool, seconds: float, warmup: float) -> None:
+    """
+    Print the per-vec-step time of each part of our engine, measured by wrapping its methods on the instance
+    (no change to sb3-es). Works with both the torch (``flatten_numpy_obs``) and NumPy (``flatten_obs``) engines.
+    """
+    vec_cls = SubprocVecEnv if subproc else DummyVecEnv
+    env: VecEnv = make_vec_env(env_id, n_envs=n_envs, seed=0, vec_env_cls=vec_cls, wrapper_class=_EnvTimer)
+    model = ARS("MlpPolicy", env, n_delta=N_DELTA, seed=0)
+    _run_for(model, warmup)
+    timers: dict[str, float] = defaultdict(float)
+    calls: dict[str, int] = defaultdict(int)
+
+    def timed(name: str, fn: Callable[..., Any]) -> Callable[..., Any]:
+        def wrapper(*args: Any, **kwargs: Any) -> Any:
+            start = time.perf_counter()
+            try:
+                return fn(*args, **kwargs)
+            finally:
+                timers[name] += time.perf_counter() - start
+                calls[name] += 1
+
+        return wrapper
+
+    def wrap(obj: Any, attr: str, name: str | None = None) -> str | None:
+        if not hasattr(obj, attr):
+            return None
+        setattr(obj, attr, timed(name or attr, getattr(obj, attr)))
+        return name or attr
+
+    policy = model.policy
+    flatten = wrap(policy, "flatten_numpy_obs") or wrap(policy, "flatten_obs")
+    nested = [name for name in (wrap(policy, a) for a in ("normalize", "_forward_numpy", "_postprocess")) if name]
+    wrap(policy, "population_actions")
+    wrap(env, "step")
+    assert model.strategy is not None
+    wrap(model.strategy, "ask", "ask/tell")
+    wrap(model.strategy, "tell", "ask/tell")
+    reset_busy = [0.0]  # env time spent in the generation-start resets (not part of env.step)
+    original_reset = env.reset
+
+    def reset() -> Any:
+        before = sum(env.get_attr("busy"))
+        try:
+            return original_reset()
+        finally:
+            reset_busy[0] += sum(env.get_attr("busy")) - before
+
+    env.reset = timed("reset", reset)  # type: ignore[method-assign]
+    original_add = ObsStats.add
+    ObsStats.add = timed("ObsStats.add", original_add)  # type: ignore[method-assign]
+    busy_start = sum(env.get_attr("busy"))
+    start_steps = model.num_timesteps
+    start = time.perf_counter()
+    try:
+        _run_for(model, seconds)
+    finally:
+        ObsStats.add = original_add  # type: ignore[method-assign]
+    total = time.perf_counter() - start
+    busy = sum(env.get_attr("busy")) - busy_start - reset_busy[0]
+    env.close()
+    vec_steps = calls["step"]
+    env_steps = model.num_timesteps - start_steps
+    env_compute = busy / (n_envs if subproc else 1)  # per worker when the workers run in parallel
+    per_worker = f" (mean per worker, {n_envs} in parallel)" if subproc else ""
+    rows = [
+        (f"policy.{flatten}", timers[str(flatten)]),
+        ("ObsStats.add (observation statistics)", timers["ObsStats.add"]),
+        ("policy.population_actions", timers["population_actions"]),
+        *[(f"- of which policy.{name}", timers[name]) for name in nested],
+        ("env.step", timers["step"]),
+        (f"- of which gym env step + auto-reset + Monitor{per_worker}", env_compute),
+        ("- of which VecEnv overhead (copies, IPC, waiting)", timers["step"] - env_compute),
+        ("generation start: env.seed + env.reset", timers["reset"]),
+        ("strategy ask + tell", timers["ask/tell"]),
+    ]
+    top_level = sum(v for k, v in timers.items() if k not in nested)
+    rows.append(("rest: evaluator loop bookkeeping, callbacks, logging", total - top_level))
+    rows.append(("TOTAL", total))
+    print(
+        f"\n### Profile: sb3-es ARS, {env_id}, {vec_cls.__name__} n_envs={n_envs}: {vec_steps} vec steps, "
+        f"{env_steps} env steps, {env_steps / total:.0f} env steps/s\n"
+    )
+    print("| part | us per vec step | share |")
+    print("|---|---:|---:|")
+    for name, seconds_spent in rows:
+        print(f"| {name} | {1e6 * seconds_spent / vec_steps:.1f} | {100 * seconds_spent / total:.0f}% |")
+
+
+# ---------------------------------------------------------------------------------------------- report
+def _table(results: list[Result], plain: Result | None, contrib: Result | None) -> list[str]:
+    lines = ["| env | runner | configuration | env steps | seconds | steps/s | mean ep len | vs plain | vs contrib |"]
+    lines.append("|---|---|---|---:|---:|---:|---:|---:|---:|")
+    for r in results:
+        ep_len = f"{r.ep_len:.0f}" if r.ep_len is not None else "-"
+        vs_plain = f"{r.rate / plain.rate:.2f}x" if plain else "-"
+        vs_contrib = f"{r.rate / contrib.rate:.2f}x" if contrib else "-"
+        lines.append(
+            f"| {r.env_id} | {r.name} | {r.config} | {r.steps} | {r.seconds:.1f} | {r.rate:.0f} | {ep_len} "
+            f"| {vs_plain} | {vs_contrib} |"
+        )
+    return lines
+
+
+def _check(label: str, value: float, target: float, unit: str = "x") -> str:
+    verdict = "PASS" if value >= target else "FAIL"
+    return f"{verdict}: {label}: {value:.2f}{unit} (target >= {target:g}{unit})"
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0] if __doc__ else None)
+    parser.add_argument("--seconds", type=float, default=8.0, help="timed window of each measurement")
+    parser.add_argument("--warmup", type=float, default=1.5, help="warm-up learn() / loop before timing")
+    parser.add_argument("--quick", action="store_true", help="2 s windows, 0.5 s warm-up (smoke test)")
+    parser.add_argument("--only", choices=["bipedal", "pendulum"], help="run one environment only")
+    parser.add_argument("--profile", action="store_true", help="also profile our engine per vec step")
+    parser.add_argument(
+        "--torch-threads", type=int, default=0, help="th.set_num_threads() in the main process (0: torch's default)"
+    )
+    args = parser.parse_args()
+    if args.torch_threads > 0:
+        th.set_num_threads(args.torch_threads)
+    load_start = os.getloadavg()[0]
+    seconds, warmup = (2.0, 0.5) if args.quick else (args.seconds, args.warmup)
+
+    def run(fn: Callable[..., Result], *fn_args: Any) -> Result:
+        result = fn(*fn_args, seconds, warmup)
+        print(f"  {result.env_id} | {result.name} | {result.config}: {result.rate:.0f} steps/s", file=sys.stderr)
+        return result
+
+    lines: list[str] = []
+    checks: list[str] = []
+    if args.only in (None, "bipedal"):
+        plain = run(measure_plain, BIPEDAL, 2)
+        ours_sub2 = run(measure_ours, BIPEDAL, 2, True)
+        ours = [ours_sub2, run(measure_ours, BIPEDAL, 4, True)]
+        ours += [run(measure_ours, BIPEDAL, n, False) for n in (2, 4, 8)]
+        contrib_async = run(measure_contrib, BIPEDAL, 2)
+        contrib_single = run(measure_contrib, BIPEDAL, 0)
+        plain1 = run(measure_plain, BIPEDAL, 1)
+        lines += _table([*ours, contrib_async, contrib_single, plain, plain1], plain, contrib_async)
+        best = max(ours, key=lambda r: r.rate)
+        checks += [
+            _check(
+                f"{BIPEDAL} ours (SubprocVecEnv n_envs=2) / sb3-contrib ARS (AsyncEval, 2 proc)",
+                ours_sub2.rate / contrib_async.rate,
+                3,
+            ),
+            _check(
+                f"{BIPEDAL} ours (SubprocVecEnv n_envs=2) / plain loop (2 proc)",
+                100 * ours_sub2.rate / plain.rate,
+                85,
+                "%",
+            ),
+            f"INFO: {BIPEDAL} closest to the plain loop: ours {best.config}: {100 * best.rate / plain.rate:.0f}%; "
+            f"ours (SubprocVecEnv n_envs=2) / sb3-contrib single process: {ours_sub2.rate / contrib_single.rate:.2f}x",
+        ]
+    if args.only in (None, "pendulum"):
+        ours16 = run(measure_ours, PENDULUM, 16, False)
+        ours = [ours16] + [run(measure_ours, PENDULUM, n, False) for n in (1, 4)]
+        contrib_single = run(measure_contrib, PENDULUM, 0)
+        plain1 = run(measure_plain, PENDULUM, 1)
+        plain2 = run(measure_plain, PENDULUM, 2)
+        if lines:
+            lines.append("")
+        lines += _table([*ours, contrib_single, plain1, plain2], plain1, contrib_single)
+        checks.append(
+            _check(
+                f"{PENDULUM} ours (DummyVecEnv n_envs=16) / sb3-contrib ARS (single process)",
+                ours16.rate / contrib_single.rate,
+                5,
+            )
+        )
+
+    command = " ".join(["python", *sys.argv])
+    print("\n## Throughput: env steps per second\n")
+    print(f"- command: `{command}` ({seconds:g} s timed window, {warmup:g} s warm-up per measurement)")
+    print(
+        f"- hardware: os.cpu_count()={os.cpu_count()}, processor={platform.processor() or 'unknown'}, "
+        f"{platform.platform()}, torch threads={th.get_num_threads()}, 1-min load average "
+        f"{load_start:.1f} at start / {os.getloadavg()[0]:.1f} at end"
+    )
+    print(
+        f"- versions: Python {platform.python_version()}, sb3-es {sb3_es.__version__}, stable-baselines3 "
+        f"{sb3.__version__}, sb3-contrib {sb3_contrib.__version__}, torch {th.__version__}, numpy "
+        f"{np.__version__}, gymnasium {gym.__version__}"
+    )
+    print("- 'vs plain': ratio to the plain loop with the same number of processes (BipedalWalker: 2, Pendulum: 1);")
+    print("  'vs contrib': ratio to sb3-contrib's ARS (BipedalWalker: AsyncEval 2 proc, Pendulum: single process)\n")
+    print("\n".join(lines))
+    print()
+    print("\n".join(checks))
+
+    if args.profile:
+        if args.only in (None, "bipedal"):
+            profile_ours(BIPEDAL, 2, False, seconds, warmup)
+            profile_ours(BIPEDAL, 2, True, seconds, warmup)
+        if args.only in (None, "pendulum"):
+            profile_ours(PENDULUM, 16, False, seconds, warmup)
+
+
+if __name__ == "__main__":
+    main()
