@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import warnings
 from typing import Any, ClassVar, TypeVar
 
 import numpy as np
@@ -114,6 +115,13 @@ class CMAES(PopulationAlgorithm):
         )
 
     def _run_generation(self, evaluator, callback) -> bool:  # type: ignore[no-untyped-def]
+        if self.strategy.stopped:
+            warnings.warn(
+                f"CMA-ES has stopped ({self.strategy.last_stop}); learn() does nothing. Pass restarts='ipop' or "
+                "'bipop', or relax the stop conditions with cma_options, to keep searching.",
+                stacklevel=2,
+            )
+            return False
         completed = super()._run_generation(evaluator, callback)
         if completed and self.strategy.last_stop:
             for key, value in self.strategy.last_stop.items():

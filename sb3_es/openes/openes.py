@@ -30,7 +30,8 @@ def decayed(base: float | Schedule, progress: float, generation: int, decay: flo
     """
     if callable(base):
         return float(base(progress))
-    return max(floor, float(base) * decay**generation)
+    # The floor bounds the decay; it never raises a value that starts below it.
+    return max(min(floor, float(base)), float(base) * decay**generation)
 
 
 class OpenES(PopulationAlgorithm):

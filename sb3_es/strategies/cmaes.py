@@ -19,6 +19,16 @@ from sb3_es.strategies.base import Strategy, check_fitness
 Restarts = Literal["ipop", "bipop"] | None
 
 
+def _global_randn(*shape: int) -> np.ndarray:
+    """
+    Standard normal samples from NumPy's global random state (which the strategy swaps for its own).
+
+    :param shape: Shape of the sample.
+    :return: The samples.
+    """
+    return np.random.randn(*shape)
+
+
 class CMAESStrategy(Strategy):
     """
     Covariance Matrix Adaptation ES, delegated to pycma's ``CMAEvolutionStrategy``.
@@ -61,7 +71,7 @@ class CMAESStrategy(Strategy):
         self.restarts = restarts
         self.max_restarts = max_restarts
         self.cma_options = dict(cma_options or {})
-        for key in ("popsize", "seed", "CMA_diagonal"):
+        for key in ("popsize", "seed", "CMA_diagonal", "randn"):
             if key in self.cma_options:
                 raise ValueError(f"cma_options[{key!r}] is set by sb3-es; use the matching CMAES argument instead.")
         self.default_population_size = int(4 + math.floor(3 * math.log(self.num_params)))
@@ -74,6 +84,7 @@ class CMAESStrategy(Strategy):
         self._regime = "large"
         self._large_restarts = 0
         self._asked: list[np.ndarray] | None = None
+        self._exhausted = False
         self._np_state = np.random.RandomState(int(self.rng.integers(2**31 - 1))).get_state()
         self.es = self._new_es(self.center, self.sigma0, self.base_population_size)
 
@@ -88,13 +99,10 @@ class CMAESStrategy(Strategy):
             np.random.set_state(outer)
 
     def _new_es(self, x0: np.ndarray, sigma0: float, popsize: int) -> cma.CMAEvolutionStrategy:
-        options = {
-            "popsize": popsize,
-            "CMA_diagonal": self.diagonal,
-            "verbose": -9,
-            "seed": int(self.rng.integers(1, 2**31 - 1)),
-            **self.cma_options,
-        }
+        # pycma's default sampler is the bound method ``np.random.randn``, which pickles with a *copy* of the
+        # global random state; a module-level function always reads the current (private, swapped-in) state.
+        options = {"popsize": popsize, "CMA_diagonal": self.diagonal, "verbose": -9, "randn": _global_randn}
+        options.update(self.cma_options)
         with self._private_random():
             return cma.CMAEvolutionStrategy(x0, sigma0, options)
 
@@ -127,14 +135,16 @@ class CMAESStrategy(Strategy):
         self.center = np.asarray(self.es.mean, dtype=np.float64).copy()
         stats = {"sigma": self.sigma, "population_size": float(self.population_size), "restarts": self.n_restarts}
         self.last_stop = dict(self.es.stop())
-        if self.last_stop and self.restarts is not None and self.n_restarts < self.max_restarts:
+        restart = bool(self.last_stop) and self.restarts is not None and self.n_restarts < self.max_restarts
+        self._exhausted = bool(self.last_stop) and not restart
+        if restart:
             self._restart()
         return stats
 
     @property
     def stopped(self) -> bool:
-        """:return: Whether pycma's stop conditions fired and no restart is left."""
-        return bool(self.last_stop) and (self.restarts is None or self.n_restarts >= self.max_restarts)
+        """:return: Whether pycma's stop conditions fired and no restart was left to run."""
+        return self._exhausted
 
     def _restart(self) -> None:
         """Start a new pycma run from the best candidate found, with the population size of the restart scheme."""
@@ -154,6 +164,7 @@ class CMAESStrategy(Strategy):
                 sigma0 = self.sigma0 * 10 ** (-2 * self.rng.uniform())
         self._regime = regime
         self.es = self._new_es(self.best_params, sigma0, popsize)
+        self.center = np.asarray(self.es.mean, dtype=np.float64).copy()
 
     def set_center(self, center: np.ndarray) -> None:
         super().set_center(center)

@@ -1,0 +1,500 @@
+"""CMA-ES as an SB3 algorithm: learning, step accounting, callbacks, logging, save/load, resume, pycma options."""
+
+from __future__ import annotations
+
+import math
+import warnings
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from envs import ConstantObsEnv, GenerationRecorder, counting_env, read_csv
+from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.evaluation import evaluate_policy
+from stable_baselines3.common.logger import configure
+from stable_baselines3.common.vec_env import DummyVecEnv
+from torch import nn
+
+from sb3_es import CMAES
+from sb3_es.strategies import CMAESStrategy
+
+with warnings.catch_warnings():
+    warnings.simplefilter("ignore")
+    import cma
+
+PENDULUM_POPULATION = 7  # pycma's default for the 3 parameters of a linear Pendulum policy: 4 + int(3 ln 3)
+PENDULUM_GENERATION = PENDULUM_POPULATION * 200  # fixed 200-step episodes, one env
+#: The seed document's network for BipedalWalker-v3: 24-40-40-4, tanh, 2,804 parameters.
+WALKER_KWARGS = dict(net_arch=[40, 40], activation_fn=nn.Tanh)
+#: pycma options that make it stop after its first generation on CartPole (returns differ by less than 1e3).
+QUICK_STOP = {"tolfun": 1e3, "tolfunhist": 1e3}
+
+
+def pendulum_env() -> DummyVecEnv:
+    return make_vec_env("Pendulum-v1", n_envs=1)
+
+
+def pendulum_model(**kwargs: Any) -> CMAES:
+    return CMAES("LinearPolicy", pendulum_env(), **{"seed": 0, **kwargs})
+
+
+def covariance(strategy: CMAESStrategy) -> np.ndarray:
+    """The full covariance matrix, or the diagonal of separable CMA-ES."""
+    es = strategy.es
+    return np.asarray(es.sm.C if hasattr(es.sm, "C") else es.dC)
+
+
+def spy_on_population_sizes(model: CMAES) -> list[tuple[int, float]]:
+    """Record (population size, sigma) of every generation asked."""
+    asked: list[tuple[int, float]] = []
+    ask = model.strategy.ask
+
+    def spy() -> np.ndarray:
+        asked.append((model.strategy.population_size, model.strategy.sigma))
+        return ask()
+
+    model.strategy.ask = spy  # type: ignore[method-assign]
+    return asked
+
+
+def assert_same_cma_state(a: CMAES, b: CMAES) -> None:
+    np.testing.assert_array_equal(a.policy.parameters_to_vector(), b.policy.parameters_to_vector())
+    for name in ("obs_mean", "obs_var", "obs_count"):
+        np.testing.assert_array_equal(getattr(a.policy, name).numpy(), getattr(b.policy, name).numpy())
+    np.testing.assert_array_equal(a.strategy.es.mean, b.strategy.es.mean)
+    assert a.strategy.es.sigma == b.strategy.es.sigma
+    np.testing.assert_array_equal(covariance(a.strategy), covariance(b.strategy))
+    assert a.strategy.es.countiter == b.strategy.es.countiter
+    np.testing.assert_array_equal(a.strategy.ask(), b.strategy.ask())
+
+
+# ---------------------------------------------------------------------------- learning
+def test_learns_cartpole() -> None:
+    """
+    Budget: 50,000 steps (about 3 s on 2 CPU cores; pycma's stop conditions may end the run earlier). With
+    these settings 14 of the seeds 0-15 reach a mean return >= 475 (seeds 1 and 6: 467 and 473); the test
+    uses seed 0.
+    """
+    model = CMAES("LinearPolicy", "CartPole-v1", sigma=0.5, n_eval_episodes=2, seed=0)
+    model.learn(50_000)
+    eval_env = make_vec_env("CartPole-v1", n_envs=1, seed=123)
+    mean_return, _ = evaluate_policy(model, eval_env, n_eval_episodes=10, deterministic=True)
+    assert mean_return >= 475
+
+
+# ---------------------------------------------------------------------------- step accounting and callbacks
+def test_exact_timestep_count() -> None:
+    counter = [0]
+    env = counting_env("CartPole-v1", 3, counter)
+    model = CMAES("LinearPolicy", env, population_size=6, n_eval_episodes=2, seed=1)
+    recorder = GenerationRecorder()
+    model.learn(1500, callback=recorder)
+    assert model.num_timesteps >= 1500
+    assert model.num_timesteps == counter[0]
+    assert model.num_timesteps % 3 == 0
+    assert recorder.n_calls == model.num_timesteps // 3  # on_step once per vec step
+    assert len(recorder.rollout_starts) == model._n_updates == model.strategy.es.countiter
+    assert recorder.training_started == recorder.training_ended == 1
+    model.learn(500, reset_num_timesteps=False, callback=recorder)
+    assert model.num_timesteps == counter[0]
+    assert recorder.n_calls == model.num_timesteps // 3
+
+
+@pytest.mark.parametrize("offset", [1, 6])
+def test_callback_stop_discards_interrupted_generation(offset: int) -> None:
+    counter = [0]
+    env = counting_env("CartPole-v1", 2, counter)
+    model = CMAES("LinearPolicy", env, population_size=4, seed=2)
+    recorder = GenerationRecorder(stop_in_generation=3, offset=offset)
+    model.learn(100_000, callback=recorder)
+    assert len(recorder.rollout_starts) == 3
+    stop_at = recorder.rollout_starts[2] + offset
+    assert recorder.n_calls == stop_at  # stopped within that very vec step
+    assert model.num_timesteps == stop_at * 2 == counter[0]
+    assert model._n_updates == 2
+    assert model.strategy.es.countiter == 2  # pycma was not told the interrupted generation
+    np.testing.assert_array_equal(model.policy.parameters_to_vector(), recorder.params_at_start[2])
+    np.testing.assert_array_equal(model.strategy.center.astype(np.float32), recorder.params_at_start[2])
+    assert model.policy.obs_count.item() == recorder.obs_count_at_start[2]
+    assert not np.array_equal(recorder.params_at_start[2], recorder.params_at_start[0])
+    assert recorder.training_ended == 1
+    model.learn(1, reset_num_timesteps=False)  # training goes on with a fresh ask()
+    assert model._n_updates == model.strategy.es.countiter == 3
+
+
+def test_progress_bar() -> None:
+    model = pendulum_model()
+    model.learn(PENDULUM_GENERATION, progress_bar=True)
+    assert model.num_timesteps == PENDULUM_GENERATION
+
+
+# ---------------------------------------------------------------------------- logging
+def test_logger_csv_keys(tmp_path: Path) -> None:
+    model = pendulum_model()
+    model.set_logger(configure(str(tmp_path), ["csv"]))
+    model.learn(2 * PENDULUM_GENERATION)
+    rows = read_csv(tmp_path / "progress.csv")
+    assert len(rows) == 2
+    required = {
+        "rollout/ep_rew_mean",
+        "time/fps",
+        "time/total_timesteps",
+        "time/iterations",
+        "train/sigma",
+        "train/population_size",
+        "rollout/candidate_return_max",
+        "rollout/candidate_return_mean",
+    }
+    assert required <= set(rows[0])
+    for row in rows:
+        assert all(row[key] != "" for key in required)
+    assert not any(key.startswith("train/stop_") for key in rows[0])
+    assert [int(r["time/total_timesteps"]) for r in rows] == [PENDULUM_GENERATION, 2 * PENDULUM_GENERATION]
+    assert [int(r["time/iterations"]) for r in rows] == [1, 2]
+    assert [float(r["train/population_size"]) for r in rows] == [PENDULUM_POPULATION] * 2
+    assert float(rows[-1]["train/sigma"]) == pytest.approx(model.strategy.es.sigma)
+    assert float(rows[0]["rollout/ep_rew_mean"]) == pytest.approx(float(rows[0]["rollout/candidate_return_mean"]))
+
+
+def test_tensorboard_log(tmp_path: Path) -> None:
+    model = pendulum_model(tensorboard_log=str(tmp_path))
+    model.learn(PENDULUM_GENERATION)
+    run_dir = tmp_path / "CMAES_1"
+    assert run_dir.is_dir()
+    assert any(p.name.startswith("events.out.tfevents") and p.stat().st_size > 0 for p in run_dir.iterdir())
+    model.learn(PENDULUM_GENERATION)
+    assert (tmp_path / "CMAES_2").is_dir()
+
+
+# ---------------------------------------------------------------------------- save / load / resume
+def test_save_load_round_trip(tmp_path: Path) -> None:
+    model = CMAES("MlpPolicy", pendulum_env(), sigma=0.2, population_size=6, seed=0, policy_kwargs=dict(net_arch=[8]))
+    model.learn(2 * 6 * 200)
+    assert model.policy.obs_count.item() > 1
+    model.save(tmp_path / "model.zip")
+    loaded = CMAES.load(tmp_path / "model.zip")
+    obs = np.random.default_rng(0).uniform(-1, 1, (16, 3)).astype(np.float32)
+    np.testing.assert_array_equal(loaded.predict(obs)[0], model.predict(obs)[0])
+    np.testing.assert_array_equal(loaded.policy.parameters_to_vector(), model.policy.parameters_to_vector())
+    assert (loaded.sigma, loaded.population_size, loaded.diagonal, loaded.restarts) == (0.2, 6, "auto", None)
+    assert loaded.num_timesteps == model.num_timesteps
+    # The pycma state comes back too.
+    np.testing.assert_array_equal(loaded.strategy.es.mean, model.strategy.es.mean)
+    assert loaded.strategy.es.sigma == model.strategy.es.sigma
+    np.testing.assert_array_equal(covariance(loaded.strategy), covariance(model.strategy))
+    assert loaded.strategy.es.countiter == model.strategy.es.countiter == 2
+
+
+def test_loaded_strategy_asks_what_the_saved_one_would(tmp_path: Path) -> None:
+    model = pendulum_model()
+    model.learn(PENDULUM_GENERATION)
+    np.random.seed(1)
+    model.save(tmp_path / "a.zip")
+    np.random.seed(2)
+    model.save(tmp_path / "b.zip")
+    expected = model.strategy.ask()
+    np.testing.assert_array_equal(CMAES.load(tmp_path / "a.zip").strategy.ask(), expected)
+    np.testing.assert_array_equal(CMAES.load(tmp_path / "b.zip").strategy.ask(), expected)
+
+
+@pytest.mark.parametrize("n", [PENDULUM_GENERATION, 2 * PENDULUM_GENERATION])
+def test_resume_is_identical_to_an_uninterrupted_run(tmp_path: Path, n: int) -> None:
+    straight = pendulum_model(seed=3)
+    straight.learn(2 * n)
+
+    first = pendulum_model(seed=3)
+    first.learn(n)
+    first.save(tmp_path / "half.zip")
+    np.random.seed(123)  # the global random state must not matter
+    resumed = CMAES.load(tmp_path / "half.zip", env=pendulum_env())
+    np.random.rand(10)
+    resumed.learn(n, reset_num_timesteps=False)
+
+    assert resumed.num_timesteps == straight.num_timesteps == 2 * n
+    assert resumed._n_updates == straight._n_updates
+    assert_same_cma_state(straight, resumed)
+    assert not np.array_equal(first.strategy.es.mean, straight.strategy.es.mean)
+
+
+def test_in_memory_continuation_is_identical_to_an_uninterrupted_run() -> None:
+    """learn(2N) and learn(N) + learn(N, reset_num_timesteps=False) on the same object, no save."""
+    straight = pendulum_model(seed=3)
+    straight.learn(2 * PENDULUM_GENERATION)
+    split = pendulum_model(seed=3)
+    split.learn(PENDULUM_GENERATION)
+    split.learn(PENDULUM_GENERATION, reset_num_timesteps=False)
+    assert_same_cma_state(straight, split)
+
+
+class GlobalRandomUser(BaseCallback):
+    """Draws from NumPy's global random state at every step, as other code in the process might."""
+
+    def _on_step(self) -> bool:
+        np.random.rand(3)
+        return True
+
+
+def test_private_random_state_ignores_and_preserves_the_global_one() -> None:
+    reference = pendulum_model(seed=5)
+    reference.learn(2 * PENDULUM_GENERATION)
+
+    model = pendulum_model(seed=5)
+    np.random.seed(0)
+    model.learn(PENDULUM_GENERATION, callback=GlobalRandomUser())
+    np.random.seed(1)
+    np.random.rand(7)
+    model.learn(PENDULUM_GENERATION, reset_num_timesteps=False, callback=GlobalRandomUser())
+    assert_same_cma_state(reference, model)
+
+    # pycma's draws do not consume or reseed the global state (SB3 seeds it when the model is built, not in learn()).
+    other = pendulum_model(seed=6)
+    np.random.seed(7)
+    other.learn(2 * PENDULUM_GENERATION)
+    drawn = np.random.rand(5)
+    np.random.seed(7)
+    np.testing.assert_array_equal(drawn, np.random.rand(5))
+    strategy = CMAESStrategy(np.zeros(4), seed=0)
+    np.random.seed(7)
+    strategy.tell(-np.sum(strategy.ask() ** 2, axis=1))
+    np.testing.assert_array_equal(drawn, np.random.rand(5))
+
+
+# ---------------------------------------------------------------------------- covariance and population size
+def test_diagonal_auto_small_policy_uses_full_covariance() -> None:
+    model = CMAES("LinearPolicy", "CartPole-v1", seed=0)
+    assert model.policy.num_params == 8 <= CMAES.DIAGONAL_THRESHOLD
+    assert model.strategy.diagonal is False
+    assert not model.strategy.es.opts["CMA_diagonal"]
+    assert covariance(model.strategy).shape == (8, 8)
+    forced = CMAES("LinearPolicy", "CartPole-v1", diagonal=True, seed=0)
+    assert forced.strategy.diagonal is True
+    assert forced.strategy.es.opts["CMA_diagonal"] is True
+    assert covariance(forced.strategy).shape == (8,)
+
+
+def test_diagonal_auto_threshold() -> None:
+    """Full covariance up to DIAGONAL_THRESHOLD parameters, diagonal above (a class attribute one can change)."""
+
+    class AtThreshold(CMAES):
+        DIAGONAL_THRESHOLD = 8
+
+    class BelowThreshold(CMAES):
+        DIAGONAL_THRESHOLD = 7
+
+    assert AtThreshold("LinearPolicy", "CartPole-v1", seed=0).strategy.diagonal is False
+    assert BelowThreshold("LinearPolicy", "CartPole-v1", seed=0).strategy.diagonal is True
+    assert BelowThreshold("LinearPolicy", "CartPole-v1", diagonal=False, seed=0).strategy.diagonal is False
+
+
+@pytest.fixture(scope="module")
+def walker_model() -> CMAES:
+    return CMAES(
+        "MlpPolicy", make_vec_env("BipedalWalker-v3", n_envs=1), population_size=8, seed=0, policy_kwargs=WALKER_KWARGS
+    )
+
+
+def test_diagonal_auto_large_policy_uses_diagonal_covariance(walker_model: CMAES) -> None:
+    assert walker_model.policy.num_params == 2804 > CMAES.DIAGONAL_THRESHOLD
+    assert walker_model.strategy.diagonal is True
+    assert walker_model.strategy.es.opts["CMA_diagonal"] is True
+    assert covariance(walker_model.strategy).shape == (2804,)
+
+
+@pytest.mark.parametrize("env_id", ["CartPole-v1", "BipedalWalker-v3"])
+def test_default_population_size_is_pycmas(env_id: str) -> None:
+    kwargs = dict(policy_kwargs=WALKER_KWARGS) if env_id == "BipedalWalker-v3" else {}
+    policy = "MlpPolicy" if kwargs else "LinearPolicy"
+    model = CMAES(policy, env_id, seed=0, **kwargs)  # type: ignore[arg-type]
+    n = model.policy.num_params
+    expected = 4 + int(3 * math.log(n))
+    assert model.strategy.population_size == expected == model.strategy.default_population_size
+    es = cma.CMAEvolutionStrategy(np.zeros(n), 1.0, {"verbose": -9, "CMA_diagonal": True})
+    assert es.popsize == expected
+    assert (n, expected) in ((8, 10), (2804, 27))
+
+
+def test_large_policy_generation_save_load_resume(walker_model: CMAES, tmp_path: Path) -> None:
+    model = walker_model
+    model.learn(1)
+    assert model._n_updates == 1
+    assert model.num_timesteps > 0
+    assert model.strategy.population_size == 8
+    model.save(tmp_path / "walker.zip")
+    loaded = CMAES.load(tmp_path / "walker.zip", env=make_vec_env("BipedalWalker-v3", n_envs=1))
+    np.testing.assert_array_equal(loaded.policy.parameters_to_vector(), model.policy.parameters_to_vector())
+    np.testing.assert_array_equal(loaded.strategy.es.mean, model.strategy.es.mean)
+    np.testing.assert_array_equal(covariance(loaded.strategy), covariance(model.strategy))
+    assert loaded.strategy.diagonal is True and loaded.strategy.population_size == 8
+    steps = loaded.num_timesteps
+    loaded.learn(1, reset_num_timesteps=False)
+    assert loaded._n_updates == 2 and loaded.strategy.es.countiter == 2
+    assert loaded.num_timesteps > steps
+    assert np.all(np.isfinite(loaded.policy.parameters_to_vector()))
+
+
+# ---------------------------------------------------------------------------- stop conditions and restarts
+def test_stop_conditions_end_training(tmp_path: Path) -> None:
+    model = CMAES("LinearPolicy", "CartPole-v1", seed=0, cma_options=QUICK_STOP)
+    model.set_logger(configure(str(tmp_path), ["csv"]))
+    model.learn(100_000)
+    assert model._n_updates == 1
+    assert model.num_timesteps < 10 * 500
+    assert model.strategy.stopped
+    assert set(model.strategy.last_stop) & {"tolfun", "tolfunhist"}
+    rows = read_csv(tmp_path / "progress.csv")
+    assert len(rows) == 1
+    stop_keys = {key for key in rows[0] if key.startswith("train/stop_")}
+    assert stop_keys == {f"train/stop_{key}" for key in model.strategy.last_stop}
+    assert all(rows[0][key] != "" for key in stop_keys)
+
+
+def test_no_stop_without_the_options() -> None:
+    model = pendulum_model()
+    model.learn(3 * PENDULUM_GENERATION)
+    assert model._n_updates == 3
+    assert not model.strategy.stopped
+
+
+def test_ipop_restart_doubles_the_population(tmp_path: Path) -> None:
+    model = CMAES("LinearPolicy", "CartPole-v1", seed=0, restarts="ipop", max_restarts=5, cma_options=QUICK_STOP)
+    model.set_logger(configure(str(tmp_path), ["csv"]))
+    asked = spy_on_population_sizes(model)
+    model.learn(1)
+    model.learn(1, reset_num_timesteps=False)
+    model.learn(1, reset_num_timesteps=False)
+    assert [size for size, _ in asked] == [10, 20, 40]
+    assert model.strategy.n_restarts == 3
+    assert not model.strategy.stopped
+    rows = read_csv(tmp_path / "progress.csv")
+    assert [float(r["train/population_size"]) for r in rows] == [10, 20, 40]
+    assert [float(r["train/restarts"]) for r in rows] == [0, 1, 2]
+    # Every restart starts from the best candidate found so far, with the initial step size.
+    np.testing.assert_array_equal(model.strategy.es.x0, model.strategy.best_params)
+    assert all(sigma == pytest.approx(0.1) for _, sigma in asked)
+
+
+@pytest.mark.parametrize("max_restarts", [1, 2])
+def test_ipop_runs_max_restarts_restarts(max_restarts: int) -> None:
+    model = CMAES(
+        "LinearPolicy", "CartPole-v1", seed=0, restarts="ipop", max_restarts=max_restarts, cma_options=QUICK_STOP
+    )
+    asked = spy_on_population_sizes(model)
+    model.learn(100_000)
+    assert model.strategy.stopped
+    # The first run plus max_restarts restarted runs, each stopping after one generation.
+    assert [size for size, _ in asked] == [10 * 2**k for k in range(max_restarts + 1)]
+
+
+def test_center_follows_a_restart() -> None:
+    model = CMAES("LinearPolicy", "CartPole-v1", seed=0, restarts="ipop", cma_options=QUICK_STOP)
+    model.learn(1)
+    assert model.strategy.n_restarts == 1
+    np.testing.assert_array_equal(model.strategy.center, model.strategy.es.mean)
+    np.testing.assert_array_equal(model.policy.parameters_to_vector(), model.strategy.es.mean.astype(np.float32))
+
+
+def test_bipop_runs_large_and_small_regimes() -> None:
+    model = CMAES("LinearPolicy", "CartPole-v1", seed=0, restarts="bipop", max_restarts=9, cma_options=QUICK_STOP)
+    asked = spy_on_population_sizes(model)
+    model.learn(60_000)
+    assert model.strategy.n_restarts >= 4
+    restarted = asked[1:]
+    base = model.strategy.base_population_size
+    assert any(size > base and sigma == pytest.approx(0.1) for size, sigma in restarted)  # large regime
+    assert any(size <= base and sigma < 0.1 for size, sigma in restarted)  # small regime: smaller steps
+    assert np.all(np.isfinite(model.policy.parameters_to_vector()))
+
+
+@pytest.mark.parametrize("key", ["popsize", "seed", "CMA_diagonal"])
+def test_cma_options_set_by_sb3_es_are_rejected(key: str) -> None:
+    with pytest.raises(ValueError, match=key):
+        CMAES("LinearPolicy", "Pendulum-v1", cma_options={key: 8})
+
+
+def test_cma_options_are_passed_to_pycma() -> None:
+    model = CMAES("LinearPolicy", "Pendulum-v1", cma_options={"tolx": 1e-7, "CMA_elitist": True})
+    assert model.strategy.es.opts["tolx"] == 1e-7
+    assert model.strategy.es.opts["CMA_elitist"] is True
+
+
+# ---------------------------------------------------------------------------- strategy alone
+def test_strategy_alone_maximizes_a_function() -> None:
+    """Ask/tell on a pure function, no env: maximize -||x - 1||^2 from 0 in 5 dimensions."""
+    strategy = CMAESStrategy(np.zeros(5), sigma=0.5, seed=0)
+    for _ in range(150):
+        population = strategy.ask()
+        strategy.tell(-np.sum((population - 1.0) ** 2, axis=1))
+        if strategy.stopped:
+            break
+    np.testing.assert_allclose(strategy.center, 1.0, atol=1e-4)
+    assert strategy.best_fitness > -1e-8
+
+
+def test_strategy_alone_is_reproducible() -> None:
+    def run(seed: int) -> np.ndarray:
+        strategy = CMAESStrategy(np.zeros(3), sigma=0.3, diagonal=True, seed=seed)
+        for _ in range(5):
+            population = strategy.ask()
+            strategy.tell(-np.sum(population**2, axis=1))
+        return strategy.center
+
+    np.testing.assert_array_equal(run(0), run(0))
+    assert not np.array_equal(run(0), run(1))
+
+
+# ---------------------------------------------------------------------------- errors
+@pytest.mark.parametrize("population_size", [1, 0, -3])
+def test_population_too_small(population_size: int) -> None:
+    with pytest.raises(ValueError, match="population_size"):
+        CMAES("LinearPolicy", "Pendulum-v1", population_size=population_size)
+
+
+@pytest.mark.parametrize("sigma", [0.0, -0.1, float("nan"), float("inf")])
+def test_bad_sigma(sigma: float) -> None:
+    with pytest.raises(ValueError, match="sigma"):
+        CMAES("LinearPolicy", "Pendulum-v1", sigma=sigma)
+
+
+def test_bad_diagonal_and_restarts() -> None:
+    with pytest.raises(ValueError, match="diagonal"):
+        CMAES("LinearPolicy", "Pendulum-v1", diagonal="yes")
+    with pytest.raises(ValueError, match="restarts"):
+        CMAES("LinearPolicy", "Pendulum-v1", restarts="lpop")  # type: ignore[arg-type]
+
+
+def test_nan_rewards_name_the_candidates_and_leave_parameters_unchanged() -> None:
+    """Constant observation 1: a candidate's action has the sign of its weight, NaN reward when positive."""
+    model = CMAES("LinearPolicy", DummyVecEnv([ConstantObsEnv]), population_size=8, zero_policy=True, seed=0)
+    asked: list[np.ndarray] = []
+    ask = model.strategy.ask
+    model.strategy.ask = lambda: asked.append(ask()) or asked[-1]  # type: ignore[method-assign]
+    mean, sigma = model.strategy.es.mean.copy(), model.strategy.es.sigma
+    with pytest.raises(ValueError, match="candidate") as info:
+        model.learn(100)
+    bad = np.flatnonzero(asked[0][:, 0] > 0).tolist()
+    assert 0 < len(bad) < 8
+    assert str(bad) in str(info.value)
+    np.testing.assert_array_equal(model.policy.parameters_to_vector(), 0.0)
+    np.testing.assert_array_equal(model.strategy.center, 0.0)
+    np.testing.assert_array_equal(model.strategy.es.mean, mean)
+    assert model.strategy.es.sigma == sigma and model.strategy.es.countiter == 0
+    assert model.policy.obs_count.item() == pytest.approx(1e-4)
+    assert model._n_updates == 0
+
+
+# ---------------------------------------------------------------------------- environments
+def test_dm_control_walker_walk() -> None:
+    shimmy = pytest.importorskip("shimmy")
+    gym.register_envs(shimmy)
+    env = make_vec_env("dm_control/walker-walk-v0", n_envs=1)
+    model = CMAES("MlpPolicy", env, population_size=4, seed=0, policy_kwargs=dict(net_arch=[16]))
+    initial = model.policy.parameters_to_vector()
+    model.learn(1)
+    assert model._n_updates == 1
+    assert model.num_timesteps == 4 * 1000
+    assert not np.array_equal(model.policy.parameters_to_vector(), initial)
+    action, _ = model.predict(env.reset())
+    assert action.shape == (1, 6) and np.all(np.abs(action) <= 1.0)

@@ -1,0 +1,540 @@
+"""OpenES as an SB3 algorithm: learning, step accounting, callbacks, logging, save/load, resume, features, errors."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch as th
+from envs import ConstantObsEnv, GenerationRecorder, ToyEnv, counting_env, read_csv, rollout
+from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.evaluation import evaluate_policy
+from stable_baselines3.common.logger import configure
+from stable_baselines3.common.vec_env import DummyVecEnv
+
+from sb3_es import OpenES
+from sb3_es.strategies import OpenESStrategy
+from sb3_es.strategies.openes import centered_ranks, shape_fitness
+
+POPULATION = 4
+PENDULUM_GENERATION = POPULATION * 200  # Pendulum-v1: fixed 200-step episodes, one env
+
+
+def pendulum_env() -> DummyVecEnv:
+    return make_vec_env("Pendulum-v1", n_envs=1)
+
+
+def pendulum_model(**kwargs: Any) -> OpenES:
+    kwargs = {"population_size": POPULATION, "seed": 0, **kwargs}
+    return OpenES("LinearPolicy", pendulum_env(), **kwargs)
+
+
+def spy_on_ask(model: OpenES) -> list[tuple[np.ndarray, float, np.ndarray]]:
+    """Record (center, sigma, population) at every ask()."""
+    asked: list[tuple[np.ndarray, float, np.ndarray]] = []
+    ask = model.strategy.ask
+
+    def spy() -> np.ndarray:
+        center = model.strategy.center.copy()
+        population = ask()
+        asked.append((center, model.strategy.sigma, population.copy()))
+        return population
+
+    model.strategy.ask = spy  # type: ignore[method-assign]
+    return asked
+
+
+def adam_state(model: OpenES) -> dict[str, np.ndarray]:
+    state = model.strategy.optimizer.state_dict()["state"]
+    if not state:
+        return {}
+    return {key: np.asarray(value).copy() for key, value in state[0].items()}
+
+
+def assert_same_strategy_state(a: OpenES, b: OpenES) -> None:
+    np.testing.assert_array_equal(a.policy.parameters_to_vector(), b.policy.parameters_to_vector())
+    for name in ("obs_mean", "obs_var", "obs_count"):
+        np.testing.assert_array_equal(getattr(a.policy, name).numpy(), getattr(b.policy, name).numpy())
+    np.testing.assert_array_equal(a.strategy.center, b.strategy.center)
+    np.testing.assert_array_equal(a.strategy._theta.detach().numpy(), b.strategy._theta.detach().numpy())
+    state_a, state_b = adam_state(a), adam_state(b)
+    assert set(state_a) == set(state_b) == {"step", "exp_avg", "exp_avg_sq"}
+    for key in state_a:
+        np.testing.assert_array_equal(state_a[key], state_b[key], err_msg=key)
+    np.testing.assert_array_equal(a.strategy.best_params, b.strategy.best_params)
+    assert a.strategy.best_fitness == b.strategy.best_fitness
+
+
+# ---------------------------------------------------------------------------- learning
+def test_learns_cartpole() -> None:
+    """
+    Budget: 50,000 steps (about 3 s on 2 CPU cores). With these settings 15 of the seeds 0-15 reach a mean
+    return >= 475 within the budget (seed 14: 385); the test uses seed 0.
+    """
+    model = OpenES("LinearPolicy", "CartPole-v1", population_size=16, sigma=0.5, learning_rate=0.1, seed=0)
+    model.learn(50_000)
+    assert 50_000 <= model.num_timesteps < 50_000 + 16 * 500
+    eval_env = make_vec_env("CartPole-v1", n_envs=1, seed=123)
+    mean_return, _ = evaluate_policy(model, eval_env, n_eval_episodes=10, deterministic=True)
+    assert mean_return >= 475
+
+
+# ---------------------------------------------------------------------------- step accounting and callbacks
+def test_exact_timestep_count() -> None:
+    counter = [0]
+    env = counting_env("CartPole-v1", 3, counter)
+    model = OpenES("LinearPolicy", env, population_size=6, n_eval_episodes=2, seed=1)
+    recorder = GenerationRecorder()
+    model.learn(1500, callback=recorder)
+    assert model.num_timesteps >= 1500
+    assert model.num_timesteps == counter[0]
+    assert model.num_timesteps % 3 == 0
+    assert recorder.n_calls == model.num_timesteps // 3  # on_step once per vec step
+    assert len(recorder.rollout_starts) == model._n_updates
+    assert recorder.training_started == recorder.training_ended == 1
+    model.learn(500, reset_num_timesteps=False, callback=recorder)
+    assert model.num_timesteps == counter[0]
+    assert recorder.n_calls == model.num_timesteps // 3
+
+
+@pytest.mark.parametrize("offset", [1, 6])
+def test_callback_stop_discards_interrupted_generation(offset: int) -> None:
+    counter = [0]
+    env = counting_env("CartPole-v1", 2, counter)
+    model = OpenES("LinearPolicy", env, population_size=4, seed=2)
+    recorder = GenerationRecorder(stop_in_generation=3, offset=offset)
+    model.learn(100_000, callback=recorder)
+    assert len(recorder.rollout_starts) == 3
+    stop_at = recorder.rollout_starts[2] + offset
+    assert recorder.n_calls == stop_at  # stopped within that very vec step
+    assert model.num_timesteps == stop_at * 2 == counter[0]
+    assert model._n_updates == 2
+    # The parameters, the optimizer and the observation statistics are those of the last completed update.
+    np.testing.assert_array_equal(model.policy.parameters_to_vector(), recorder.params_at_start[2])
+    np.testing.assert_array_equal(model.strategy.center.astype(np.float32), recorder.params_at_start[2])
+    assert int(adam_state(model)["step"]) == 2
+    assert model.policy.obs_count.item() == recorder.obs_count_at_start[2]
+    assert not np.array_equal(recorder.params_at_start[2], recorder.params_at_start[0])
+    assert recorder.training_ended == 1
+    # Training can go on afterwards.
+    model.learn(1, reset_num_timesteps=False)
+    assert model._n_updates == 3
+
+
+def test_callback_stop_in_first_generation_keeps_initial_parameters() -> None:
+    model = OpenES("LinearPolicy", "CartPole-v1", population_size=4, seed=0)
+    initial = model.policy.parameters_to_vector()
+    model.learn(10_000, callback=GenerationRecorder(stop_at=7))
+    assert model.num_timesteps == 7
+    assert model._n_updates == 0
+    np.testing.assert_array_equal(model.policy.parameters_to_vector(), initial)
+    assert adam_state(model) == {}
+
+
+def test_progress_bar() -> None:
+    model = pendulum_model()
+    model.learn(PENDULUM_GENERATION, progress_bar=True)
+    assert model.num_timesteps == PENDULUM_GENERATION
+
+
+# ---------------------------------------------------------------------------- logging
+def test_logger_csv_keys(tmp_path: Path) -> None:
+    model = pendulum_model()
+    model.set_logger(configure(str(tmp_path), ["csv"]))
+    model.learn(2 * PENDULUM_GENERATION)
+    rows = read_csv(tmp_path / "progress.csv")
+    assert len(rows) == 2
+    required = {
+        "rollout/ep_rew_mean",
+        "time/fps",
+        "time/total_timesteps",
+        "time/iterations",
+        "train/sigma",
+        "train/learning_rate",
+        "train/best_fitness",
+        "rollout/candidate_return_max",
+        "rollout/candidate_return_mean",
+    }
+    assert required <= set(rows[0])
+    for row in rows:
+        assert all(row[key] != "" for key in required)
+    assert [int(r["time/total_timesteps"]) for r in rows] == [PENDULUM_GENERATION, 2 * PENDULUM_GENERATION]
+    assert [int(r["time/iterations"]) for r in rows] == [1, 2]
+    assert float(rows[0]["train/sigma"]) == pytest.approx(0.1)
+    assert float(rows[0]["train/learning_rate"]) == pytest.approx(0.01)
+    # One env, one episode per candidate: the first generation's episodes are the candidates'.
+    assert float(rows[0]["rollout/ep_rew_mean"]) == pytest.approx(float(rows[0]["rollout/candidate_return_mean"]))
+    assert float(rows[0]["train/best_fitness"]) == pytest.approx(float(rows[0]["rollout/candidate_return_max"]))
+
+
+def test_tensorboard_log(tmp_path: Path) -> None:
+    model = pendulum_model(tensorboard_log=str(tmp_path))
+    model.learn(PENDULUM_GENERATION)
+    run_dir = tmp_path / "OpenES_1"
+    assert run_dir.is_dir()
+    assert any(p.name.startswith("events.out.tfevents") and p.stat().st_size > 0 for p in run_dir.iterdir())
+    model.learn(PENDULUM_GENERATION)
+    assert (tmp_path / "OpenES_2").is_dir()
+
+
+# ---------------------------------------------------------------------------- save / load / resume
+def test_save_load_round_trip(tmp_path: Path) -> None:
+    model = OpenES(
+        "MlpPolicy",
+        pendulum_env(),
+        population_size=POPULATION,
+        sigma=0.05,
+        optimizer="sgd",
+        seed=0,
+        policy_kwargs=dict(net_arch=[8]),
+    )
+    model.learn(PENDULUM_GENERATION)
+    assert model.policy.obs_count.item() > 1
+    model.save(tmp_path / "model.zip")
+    loaded = OpenES.load(tmp_path / "model.zip")
+    obs = np.random.default_rng(0).uniform(-1, 1, (16, 3)).astype(np.float32)
+    np.testing.assert_array_equal(loaded.predict(obs)[0], model.predict(obs)[0])
+    np.testing.assert_array_equal(loaded.policy.parameters_to_vector(), model.policy.parameters_to_vector())
+    assert (loaded.population_size, loaded.sigma, loaded.optimizer) == (POPULATION, 0.05, "sgd")
+    assert isinstance(loaded.strategy.optimizer, th.optim.SGD)
+    assert loaded.num_timesteps == model.num_timesteps
+    np.testing.assert_array_equal(loaded.strategy.ask(), model.strategy.ask())
+
+
+@pytest.mark.parametrize(
+    ("n", "kwargs"),
+    [
+        (PENDULUM_GENERATION, {}),
+        (2 * PENDULUM_GENERATION, {}),
+        (2 * PENDULUM_GENERATION, dict(sigma_decay=0.8, learning_rate_decay=0.9, learning_rate=0.05)),
+    ],
+)
+def test_resume_is_identical_to_an_uninterrupted_run(tmp_path: Path, n: int, kwargs: dict[str, Any]) -> None:
+    straight = pendulum_model(seed=3, **kwargs)
+    straight.learn(2 * n)
+
+    first = pendulum_model(seed=3, **kwargs)
+    first.learn(n)
+    first.save(tmp_path / "half.zip")
+    resumed = OpenES.load(tmp_path / "half.zip", env=pendulum_env())
+    resumed.learn(n, reset_num_timesteps=False)
+
+    assert resumed.num_timesteps == straight.num_timesteps == 2 * n
+    assert resumed._n_updates == straight._n_updates
+    assert_same_strategy_state(straight, resumed)
+    assert straight.strategy.sigma == resumed.strategy.sigma
+    assert straight.strategy.learning_rate == resumed.strategy.learning_rate
+    np.testing.assert_array_equal(straight.strategy.ask(), resumed.strategy.ask())
+    # Sanity: training did move the parameters, so equality is not trivial.
+    assert not np.array_equal(first.strategy.center, straight.strategy.center)
+
+
+# ---------------------------------------------------------------------------- sampling and fitness shaping
+def test_antithetic_candidates_are_mirrored_about_the_center() -> None:
+    model = pendulum_model(population_size=6)
+    asked = spy_on_ask(model)
+    model.learn(2 * 6 * 200)
+    assert len(asked) == 2
+    for center, sigma, population in asked:
+        plus, minus = population[:3], population[3:]
+        np.testing.assert_allclose(plus - center, -(minus - center), atol=1e-12)
+        assert sigma == 0.1
+        assert not np.allclose(plus, center)
+    # Without mirrored sampling, the candidates are independent.
+    strategy = OpenESStrategy(np.zeros(5), population_size=6, antithetic=False, seed=0)
+    population = strategy.ask()
+    assert not np.allclose(population[:3], -population[3:])
+
+
+def test_centered_ranks() -> None:
+    np.testing.assert_allclose(centered_ranks(np.array([3.0, 1.0, 2.0, 10.0])), [1 / 6, -0.5, -1 / 6, 0.5])
+    x = np.random.default_rng(0).normal(size=101) * 1e3
+    ranks = centered_ranks(x)
+    assert ranks.min() == -0.5 and ranks.max() == 0.5
+    assert np.all(np.abs(ranks) <= 0.5)
+    assert np.argmax(ranks) == np.argmax(x) and np.argmin(ranks) == np.argmin(x)
+    np.testing.assert_allclose(np.sort(ranks), np.linspace(-0.5, 0.5, 101))
+    # Ties get distinct ranks (as in OpenAI's and estool's compute_centered_ranks).
+    np.testing.assert_allclose(centered_ranks(np.ones(3)), [-0.5, 0.0, 0.5])
+
+
+def test_shape_fitness_options() -> None:
+    fitness = np.array([1.0, 4.0, -2.0, 7.0])
+    np.testing.assert_allclose(shape_fitness(fitness, "centered_rank"), centered_ranks(fitness))
+    z = shape_fitness(fitness, "zscore")
+    assert z.mean() == pytest.approx(0.0, abs=1e-12) and z.std() == pytest.approx(1.0)
+    np.testing.assert_allclose(z, (fitness - fitness.mean()) / fitness.std())
+    np.testing.assert_array_equal(shape_fitness(np.full(4, 3.0), "zscore"), 0.0)
+    np.testing.assert_array_equal(shape_fitness(fitness, "raw"), fitness)
+    with pytest.raises(ValueError, match="fitness_shaping"):
+        shape_fitness(fitness, "rank")  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("shaping", ["centered_rank", "zscore", "raw"])
+def test_strategy_update_uses_the_shaped_fitness(shaping: str) -> None:
+    """Plain SGD step: center + lr * noise^T shaped / (P * sigma) (no weight decay, no momentum)."""
+    strategy = OpenESStrategy(
+        np.array([0.5, -1.0, 2.0]), 8, fitness_shaping=shaping, optimizer="sgd", momentum=0.0, seed=0
+    )
+    strategy.sigma, strategy.learning_rate = 0.2, 0.3
+    center = strategy.center.copy()
+    population = strategy.ask()
+    noise = (population - center) / 0.2
+    fitness = np.array([1.0, 5.0, 0.0, 2.0, 3.0, 0.5, 7.0, 1.5])
+    info = strategy.tell(fitness)
+    grad = noise.T @ shape_fitness(fitness, shaping) / (8 * 0.2)  # type: ignore[arg-type]
+    np.testing.assert_allclose(strategy.center, center + 0.3 * grad, rtol=1e-10)
+    assert info["grad_norm"] == pytest.approx(np.linalg.norm(grad))
+
+
+def test_adam_and_sgd_momentum_steps() -> None:
+    fitness = [np.array([1.0, 5.0, 0.0, 2.0]), np.array([3.0, -1.0, 2.0, 4.0])]
+
+    def run(optimizer: str) -> tuple[list[np.ndarray], list[np.ndarray]]:
+        strategy = OpenESStrategy(np.array([0.5, -1.0]), 4, optimizer=optimizer, weight_decay=0.1, seed=0)
+        strategy.sigma, strategy.learning_rate = 0.1, 0.05
+        centers, grads = [strategy.center.copy()], []
+        for f in fitness:
+            population = strategy.ask()
+            noise = (population - strategy.center) / 0.1
+            # Descent direction of the optimizers: -(estimated gradient) + weight_decay * center.
+            grads.append(-(noise.T @ centered_ranks(f)) / (4 * 0.1) + 0.1 * strategy.center)
+            strategy.tell(f)
+            centers.append(strategy.center.copy())
+        return centers, grads
+
+    centers, grads = run("sgd")  # momentum 0.9: v1 = g1, v2 = 0.9 v1 + g2
+    np.testing.assert_allclose(centers[1], centers[0] - 0.05 * grads[0], rtol=1e-10)
+    np.testing.assert_allclose(centers[2], centers[1] - 0.05 * (0.9 * grads[0] + grads[1]), rtol=1e-10)
+
+    centers, grads = run("adam")  # first bias-corrected Adam step: lr * g / (|g| + eps)
+    np.testing.assert_allclose(centers[1], centers[0] - 0.05 * grads[0] / (np.abs(grads[0]) + 1e-8), rtol=1e-7)
+
+
+def test_sgd_optimizer_option() -> None:
+    model = pendulum_model(optimizer="sgd", momentum=0.5, learning_rate=0.02)
+    assert isinstance(model.strategy.optimizer, th.optim.SGD)
+    assert model.strategy.optimizer.param_groups[0]["momentum"] == 0.5
+    initial = model.strategy.center.copy()
+    model.learn(2 * PENDULUM_GENERATION)
+    assert model._n_updates == 2
+    assert not np.array_equal(model.strategy.center, initial)
+    assert np.all(np.isfinite(model.policy.parameters_to_vector()))
+    assert isinstance(pendulum_model().strategy.optimizer, th.optim.Adam)
+
+
+# ---------------------------------------------------------------------------- sigma / learning rate
+def test_sigma_and_learning_rate_decay_to_their_floor(tmp_path: Path) -> None:
+    model = pendulum_model(
+        population_size=2,
+        sigma=0.1,
+        sigma_decay=0.5,
+        sigma_limit=0.02,
+        learning_rate=0.04,
+        learning_rate_decay=0.5,
+        learning_rate_limit=0.01,
+    )
+    model.set_logger(configure(str(tmp_path), ["csv"]))
+    asked = spy_on_ask(model)
+    model.learn(5 * 2 * 200)
+    rows = read_csv(tmp_path / "progress.csv")
+    assert len(rows) == 5
+    np.testing.assert_allclose([float(r["train/sigma"]) for r in rows], [0.1, 0.05, 0.025, 0.02, 0.02])
+    np.testing.assert_allclose([float(r["train/learning_rate"]) for r in rows], [0.04, 0.02, 0.01, 0.01, 0.01])
+    # The perturbations really use the decayed noise: candidates are center +/- sigma * eps.
+    for (center, sigma, population), row in zip(asked, rows):
+        assert sigma == pytest.approx(float(row["train/sigma"]))
+        np.testing.assert_allclose(population[0] - center, center - population[1], atol=1e-12)
+
+
+def test_sb3_schedules(tmp_path: Path) -> None:
+    total = 4 * PENDULUM_GENERATION
+    model = pendulum_model(sigma=lambda progress: 0.1 * progress, learning_rate=lambda progress: 0.02 * progress)
+    model.set_logger(configure(str(tmp_path), ["csv"]))
+    asked = spy_on_ask(model)
+    model.learn(total)
+    rows = read_csv(tmp_path / "progress.csv")
+    assert len(rows) == 4
+    starts = [0] + [int(r["time/total_timesteps"]) for r in rows[:-1]]
+    progress = [1.0 - s / total for s in starts]
+    np.testing.assert_allclose([float(r["train/sigma"]) for r in rows], [0.1 * p for p in progress])
+    np.testing.assert_allclose([float(r["train/learning_rate"]) for r in rows], [0.02 * p for p in progress])
+    for (_, sigma, _), p in zip(asked, progress):
+        assert sigma == pytest.approx(0.1 * p)
+
+
+def test_values_below_the_floor_are_not_raised(tmp_path: Path) -> None:
+    """estool only decays while above the limit; a value set below it is used as given."""
+    model = pendulum_model(sigma=0.005, learning_rate=1e-4)  # defaults: sigma_limit=0.01, learning_rate_limit=1e-3
+    model.set_logger(configure(str(tmp_path), ["csv"]))
+    model.learn(PENDULUM_GENERATION)
+    row = read_csv(tmp_path / "progress.csv")[0]
+    assert float(row["train/sigma"]) == pytest.approx(0.005)
+    assert float(row["train/learning_rate"]) == pytest.approx(1e-4)
+
+
+# ---------------------------------------------------------------------------- weight decay, best tracking
+@pytest.mark.parametrize("weight_decay", [0.0, 0.05])
+def test_weight_decay_with_flat_fitness(weight_decay: float) -> None:
+    """CartPole with alive_bonus_offset=-1: every fitness is 0, so only weight decay moves the center."""
+    model = OpenES(
+        "LinearPolicy",
+        "CartPole-v1",
+        population_size=4,
+        alive_bonus_offset=-1.0,
+        fitness_shaping="zscore",
+        weight_decay=weight_decay,
+        learning_rate=0.01,
+        seed=0,
+    )
+    initial = np.array([0.5, -0.3, 0.2, -0.8, 0.1, 0.4, -0.6, 0.7])
+    model.policy.load_from_vector(initial)
+    model.strategy.set_center(initial)
+    model.learn(1)
+    model.learn(1, reset_num_timesteps=False)
+    assert model._n_updates == 2
+    center = model.strategy.center
+    if weight_decay == 0:
+        np.testing.assert_array_equal(center, initial)
+    else:
+        # The decay gradient is weight_decay * center: Adam moves every weight toward zero by about lr per step.
+        np.testing.assert_array_equal(np.sign(center), np.sign(initial))
+        np.testing.assert_allclose(np.abs(initial) - np.abs(center), 2 * 0.01, rtol=0.01)
+
+
+def test_best_tracking_in_the_strategy() -> None:
+    for forget_best in (False, True):
+        strategy = OpenESStrategy(np.zeros(3), 4, forget_best=forget_best, seed=0)
+        first = strategy.ask().copy()
+        strategy.tell(np.array([1.0, 9.0, 3.0, 2.0]))
+        assert strategy.best_fitness == 9.0
+        np.testing.assert_array_equal(strategy.best_params, first[1])
+        second = strategy.ask().copy()
+        strategy.tell(np.array([4.0, 0.0, 5.0, 1.0]))
+        if forget_best:
+            assert strategy.best_fitness == 5.0
+            np.testing.assert_array_equal(strategy.best_params, second[2])
+        else:
+            assert strategy.best_fitness == 9.0
+            np.testing.assert_array_equal(strategy.best_params, first[1])
+
+
+@pytest.mark.parametrize("forget_best", [False, True])
+def test_best_tracking_in_training(tmp_path: Path, forget_best: bool) -> None:
+    env = DummyVecEnv([ToyEnv])
+    model = OpenES(
+        "LinearPolicy",
+        env,
+        population_size=6,
+        sigma=0.3,
+        forget_best=forget_best,
+        seed=0,
+        policy_kwargs=dict(normalize_observations=False),
+    )
+    model.set_logger(configure(str(tmp_path), ["csv"]))
+    model.learn(1)
+    for _ in range(3):
+        model.learn(1, reset_num_timesteps=False)
+    rows = read_csv(tmp_path / "progress.csv")
+    best = [float(r["train/best_fitness"]) for r in rows]
+    generation_max = [float(r["rollout/candidate_return_max"]) for r in rows]
+    expected = generation_max if forget_best else np.maximum.accumulate(generation_max)
+    np.testing.assert_allclose(best, expected)
+    # best_params reproduce best_fitness (ToyEnv is deterministic, no observation normalization).
+    assert model.best_params is model.strategy.best_params
+    episode_return, _, _ = rollout(ToyEnv(), model.policy, model.best_params)
+    assert episode_return == pytest.approx(model.strategy.best_fitness, abs=1e-9)
+
+
+# ---------------------------------------------------------------------------- strategy alone
+def test_strategy_alone_maximizes_a_function() -> None:
+    """Ask/tell on a pure function, no env: maximize -||x - 1||^2 from 0 in 5 dimensions."""
+    strategy = OpenESStrategy(np.zeros(5), population_size=20, seed=0)
+    strategy.sigma, strategy.learning_rate = 0.1, 0.05
+    for _ in range(300):
+        population = strategy.ask()
+        strategy.tell(-np.sum((population - 1.0) ** 2, axis=1))
+    assert np.linalg.norm(strategy.center - 1.0) < 0.1
+    assert strategy.best_fitness > -0.05
+
+
+# ---------------------------------------------------------------------------- errors
+@pytest.mark.parametrize("population_size", [3, 7])
+def test_odd_population_with_antithetic(population_size: int) -> None:
+    with pytest.raises(ValueError, match="population_size"):
+        OpenES("LinearPolicy", "Pendulum-v1", population_size=population_size)
+    model = OpenES("LinearPolicy", "Pendulum-v1", population_size=population_size, antithetic=False)
+    assert model.strategy.ask().shape == (population_size, model.policy.num_params)
+
+
+@pytest.mark.parametrize("population_size", [1, 0, -2])
+def test_population_too_small(population_size: int) -> None:
+    for antithetic in (True, False):
+        with pytest.raises(ValueError, match="population_size"):
+            OpenES("LinearPolicy", "Pendulum-v1", population_size=population_size, antithetic=antithetic)
+
+
+@pytest.mark.parametrize("sigma", [0.0, -0.1, float("nan"), lambda progress: 0.0])
+def test_bad_sigma(sigma: Any) -> None:
+    with pytest.raises(ValueError, match="sigma"):
+        OpenES("LinearPolicy", "Pendulum-v1", sigma=sigma)
+
+
+def test_bad_names() -> None:
+    with pytest.raises(ValueError, match="fitness_shaping"):
+        OpenES("LinearPolicy", "Pendulum-v1", fitness_shaping="ranks")  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="optimizer"):
+        OpenES("LinearPolicy", "Pendulum-v1", optimizer="rmsprop")  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("name", ["sigma_decay", "learning_rate_decay"])
+@pytest.mark.parametrize("value", [0.0, -0.5, 1.01, 2.0])
+def test_decay_outside_unit_interval(name: str, value: float) -> None:
+    with pytest.raises(ValueError, match=name):
+        OpenES("LinearPolicy", "Pendulum-v1", **{name: value})
+
+
+def test_decay_of_one_is_accepted() -> None:
+    OpenES("LinearPolicy", "Pendulum-v1", sigma_decay=1.0, learning_rate_decay=1.0)
+
+
+def test_negative_weight_decay() -> None:
+    with pytest.raises(ValueError, match="weight_decay"):
+        OpenES("LinearPolicy", "Pendulum-v1", weight_decay=-0.1)
+
+
+def test_nan_rewards_name_the_candidates_and_leave_parameters_unchanged() -> None:
+    """Constant observation 1: a candidate's action has the sign of its weight, NaN reward when positive."""
+    model = OpenES("LinearPolicy", DummyVecEnv([ConstantObsEnv]), population_size=6, zero_policy=True, seed=0)
+    asked = spy_on_ask(model)
+    before = (model.policy.parameters_to_vector(), model.strategy.center.copy(), model.policy.obs_count.item())
+    with pytest.raises(ValueError, match="candidate") as info:
+        model.learn(100)
+    population = asked[0][2]
+    bad = np.flatnonzero(population[:, 0] > 0).tolist()
+    assert len(bad) == 3  # mirrored pairs around 0: exactly one of each pair is positive
+    assert str(bad) in str(info.value)
+    np.testing.assert_array_equal(model.policy.parameters_to_vector(), before[0])
+    np.testing.assert_array_equal(model.strategy.center, before[1])
+    assert model.policy.obs_count.item() == before[2]
+    assert adam_state(model) == {}
+    assert model.strategy.best_fitness == -np.inf
+    assert model._n_updates == 0
+
+
+# ---------------------------------------------------------------------------- environments
+def test_dm_control_walker_walk() -> None:
+    shimmy = pytest.importorskip("shimmy")
+    gym.register_envs(shimmy)
+    env = make_vec_env("dm_control/walker-walk-v0", n_envs=1)
+    model = OpenES("MlpPolicy", env, population_size=4, seed=0, policy_kwargs=dict(net_arch=[16]))
+    initial = model.policy.parameters_to_vector()
+    model.learn(1)
+    assert model._n_updates == 1
+    assert model.num_timesteps == 4 * 1000
+    assert not np.array_equal(model.policy.parameters_to_vector(), initial)
+    action, _ = model.predict(env.reset())
+    assert action.shape == (1, 6) and np.all(np.abs(action) <= 1.0)
