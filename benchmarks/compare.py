@@ -1,0 +1,750 @@
+"""
+Compare algorithms on environments over seeds with equal budgets: one TensorBoard root, CSVs, plots, a table.
+
+Examples::
+
+    # ES methods against PPO and SAC on Pendulum-v1, 3 seeds, 200k env steps each
+    python benchmarks/compare.py --algos ars openes cmaes reinforce ppo sac --envs Pendulum-v1 \\
+        --seeds 0 1 2 --steps 200000 --eval-freq 10000 --out results/pendulum
+
+    # equal wall-clock budgets (training time, evaluations excluded) instead of env steps
+    python benchmarks/compare.py --algos ars ppo --envs Swimmer-v5 --seconds 600 --out results/swimmer
+
+    # redraw the plots and the table from the runs already in an output folder
+    python benchmarks/compare.py --out results/pendulum --report-only
+
+Runs are sequential, one process, with a progress line. Hyperparameters: ``benchmarks/hyperparams/<algo>.yml``
+for the sb3-es algorithms (``ars``, ``openes``, ``cmaes``, ``reinforce``), rl-zoo3's own
+``hyperparams/<algo>.yml`` for the others (``ppo``, ``sac``, ...). When rl-zoo3 has no entry for an env id
+but has one for an older version (``Hopper-v4`` for ``Hopper-v5``) that entry is used, otherwise rl-zoo3's
+``default``; for Dict observations (dm_control) a ``FlattenObservation`` wrapper is added. The
+hyperparameters used are written to ``configs/``. Models, envs and ``VecNormalize`` come from
+rl-zoo3's ``ExperimentManager`` (with the sb3-es changes of :mod:`sb3_es.zoo`).
+
+Every ``--eval-freq`` env steps, and at the start and the end of training, SB3's ``EvalCallback``
+evaluates the current policy (deterministic, ``--eval-episodes`` episodes on a separate env) and writes
+``eval/mean_reward`` to TensorBoard; the same numbers go to the run's CSV with the env steps and the
+training wall-clock time (evaluation time excluded). A budget in steps is passed to ``learn()``, which
+may end past it (a population method finishes its generation, PPO its rollout); the steps actually
+taken are reported. A wall-clock budget stops training through a callback.
+
+Output folder layout::
+
+    tb/<env>/<ALGO>_<n>/                 TensorBoard runs, side by side (tensorboard --logdir <out>/tb)
+    runs/<env>/<algo>/seed<s>/eval.csv   env_steps, wall_s, wall_total_s, mean_return, std_return, mean_ep_length
+    runs/<env>/<algo>/seed<s>/summary.json
+    logs/<algo>/<env>_<n>/               rl-zoo log folders: saved model, config.yml, monitor files
+    configs/<algo>-<env>.yml             hyperparameters used for rl-zoo3's algorithms
+    plots/<env>.png                      mean return against env steps and against wall-clock, band over seeds
+    results.md                           table: steps, time, final and best return, time to threshold
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import csv
+import io
+import json
+import math
+import os
+import platform
+import re
+import shlex
+import sys
+import time
+import traceback
+import warnings
+from collections import defaultdict
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import torch
+import yaml
+from stable_baselines3.common.callbacks import EvalCallback
+from stable_baselines3.common.utils import set_random_seed
+from stable_baselines3.common.vec_env import VecEnv
+
+try:
+    import rl_zoo3
+
+    from sb3_es.zoo import ExperimentManager, default_conf_file, register, sb3_es_algos
+except ImportError as e:  # pragma: no cover
+    raise SystemExit(f"benchmarks/compare.py needs rl_zoo3: pip install 'sb3-es[zoo]' ({e})") from e
+
+#: Display names (TensorBoard run names are the class names).
+DEFAULT_ALGOS = ("ars", "openes", "cmaes", "reinforce", "ppo", "sac")
+CSV_FIELDS = ("env_steps", "wall_s", "wall_total_s", "mean_return", "std_return", "mean_ep_length")
+
+
+def env_slug(env_id: str) -> str:
+    """
+    File-name form of an env id (``dm_control/walker-walk-v0`` -> ``dm_control-walker-walk-v0``), as rl-zoo.
+
+    :param env_id: Gymnasium env id.
+    :return: The slug.
+    """
+    return env_id.replace("/", "-")
+
+
+# ---------------------------------------------------------------------------------------------- configs
+def resolve_zoo_entry(algo: str, env_id: str) -> tuple[dict[str, Any], str]:
+    """
+    rl-zoo3's own hyperparameters for ``algo`` on ``env_id``, with fallbacks for newer env versions.
+
+    :param algo: rl-zoo algorithm name (``ppo``, ``sac``, ...).
+    :param env_id: Gymnasium env id.
+    :return: The entry and a note saying where it comes from.
+    """
+    path = Path(rl_zoo3.__file__).parent / "hyperparams" / f"{algo}.yml"
+    data = yaml.safe_load(path.read_text())
+    source = f"rl_zoo3 {rl_zoo3.__version__} hyperparams/{algo}.yml"
+    if env_id in data:
+        entry, note = dict(data[env_id]), f"{source}, entry {env_id}"
+    else:
+        match = re.fullmatch(r"(.+)-v(\d+)", env_id)
+        older = []
+        if match:
+            for key in data:
+                other = re.fullmatch(re.escape(match.group(1)) + r"-v(\d+)", str(key))
+                if other and int(other.group(1)) < int(match.group(2)):
+                    older.append((int(other.group(1)), key))
+        if older:
+            key = max(older)[1]
+            entry, note = dict(data[key]), f"{source}, entry {key} (no {env_id} entry; same task, older version)"
+        elif "default" in data:
+            entry, note = dict(data["default"]), f"{source}, entry default (no {env_id} entry)"
+        else:
+            raise ValueError(f"{path} has no entry for {env_id} and no default entry.")
+    env = gym.make(env_id)
+    try:
+        dict_obs = isinstance(env.observation_space, gym.spaces.Dict)
+    finally:
+        env.close()
+    if dict_obs and entry.get("policy") == "MlpPolicy" and "env_wrapper" not in entry:
+        entry["env_wrapper"] = "gymnasium.wrappers.FlattenObservation"
+        note += "; env_wrapper FlattenObservation added (Dict observations)"
+    return entry, note
+
+
+def config_for(algo: str, env_id: str, out: Path) -> tuple[Path, str]:
+    """
+    The hyperparameter file for one (algorithm, env): ours, or a derived copy of rl-zoo3's entry.
+
+    :param algo: Algorithm name.
+    :param env_id: Env id.
+    :param out: Output folder (derived files go to ``out/configs``).
+    :return: Path of a YAML file with an entry for ``env_id`` and a note on its source.
+    """
+    if algo in sb3_es_algos():
+        path = default_conf_file(algo)
+        data = yaml.safe_load(path.read_text())
+        key = env_id if env_id in data else "default"
+        return path, f"sb3-es {path.parent.name}/{path.name}, entry {key}"
+    entry, note = resolve_zoo_entry(algo, env_id)
+    path = out / "configs" / f"{algo}-{env_slug(env_id)}.yml"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(f"# {note}\n" + yaml.safe_dump({env_id: entry}, sort_keys=True))
+    return path, note
+
+
+# ---------------------------------------------------------------------------------------------- progress
+class Progress:
+    """
+    One progress line per run: ``\\r``-updated on a terminal, a new line every 30 s otherwise.
+
+    :param label: Run label, e.g. ``[2/6] PPO Pendulum-v1 seed 0``.
+    :param total_steps: Step budget (or None).
+    :param total_seconds: Wall-clock budget (or None).
+    """
+
+    def __init__(self, label: str, total_steps: int | None, total_seconds: float | None) -> None:
+        self.label = label
+        self.total_steps = total_steps
+        self.total_seconds = total_seconds
+        self.tty = sys.stdout.isatty()
+        self.period = 1.0 if self.tty else 30.0
+        self._last = -math.inf
+
+    def update(self, steps: int, train_s: float, last_return: float | None, force: bool = False) -> None:
+        """
+        Print the line if enough time has passed.
+
+        :param steps: Env steps so far.
+        :param train_s: Training wall-clock seconds so far.
+        :param last_return: Last evaluation's mean return.
+        :param force: Print now.
+        """
+        now = time.perf_counter()
+        if not force and now - self._last < self.period:
+            return
+        self._last = now
+        parts = [f"{steps:,}" + (f"/{self.total_steps:,} steps" if self.total_steps else " steps")]
+        fractions = []
+        if self.total_steps:
+            fractions.append(steps / self.total_steps)
+        if self.total_seconds:
+            fractions.append(train_s / self.total_seconds)
+        if fractions:
+            parts.append(f"{100 * min(1.0, max(fractions)):3.0f}%")
+        parts.append(f"{train_s:,.0f}s" + (f"/{self.total_seconds:,.0f}s" if self.total_seconds else ""))
+        if last_return is not None:
+            parts.append(f"eval {last_return:,.1f}")
+        line = f"{self.label}: " + " | ".join(parts)
+        if self.tty:
+            print("\r" + line.ljust(110), end="", flush=True)
+        else:
+            print(line, flush=True)
+
+    def close(self) -> None:
+        """End the line on a terminal."""
+        if self.tty:
+            print(flush=True)
+
+
+# ---------------------------------------------------------------------------------------------- recording
+class RecordingEvalCallback(EvalCallback):
+    """
+    SB3's ``EvalCallback`` that also evaluates at the start and the end of training, writes each evaluation
+    to a CSV with the env steps and the training wall-clock time (evaluations excluded), stops training at a
+    wall-clock budget, and drives the progress line.
+
+    :param eval_env: Evaluation env.
+    :param csv_path: CSV file to write.
+    :param eval_freq: Vec steps (callback calls) between evaluations; 0 for start and end only.
+    :param n_eval_episodes: Episodes per evaluation.
+    :param log_path: Folder for SB3's ``evaluations.npz``.
+    :param budget_seconds: Stop training after this much training wall-clock (None: no limit).
+    :param progress: Progress line.
+    """
+
+    def __init__(
+        self,
+        eval_env: VecEnv,
+        csv_path: Path,
+        eval_freq: int,
+        n_eval_episodes: int,
+        log_path: str,
+        budget_seconds: float | None,
+        progress: Progress,
+    ) -> None:
+        super().__init__(
+            eval_env,
+            n_eval_episodes=n_eval_episodes,
+            eval_freq=eval_freq,
+            log_path=log_path,
+            deterministic=True,
+            verbose=0,
+        )
+        self.csv_path = csv_path
+        self.budget_seconds = budget_seconds
+        self.progress = progress
+        self.rows: list[dict[str, float]] = []
+        self.eval_seconds = 0.0
+        self._start = 0.0
+
+    def train_seconds(self) -> float:
+        """
+        Wall-clock seconds since training started, evaluations excluded.
+
+        :return: Seconds.
+        """
+        return time.perf_counter() - self._start - self.eval_seconds
+
+    def _evaluate(self, force: bool) -> bool:
+        n_calls, eval_freq = self.n_calls, self.eval_freq
+        if force:
+            self.n_calls, self.eval_freq = 1, 1
+        due = self.eval_freq > 0 and self.n_calls % self.eval_freq == 0
+        start = time.perf_counter()
+        try:
+            continue_training = super()._on_step()
+        finally:
+            self.n_calls, self.eval_freq = n_calls, eval_freq
+        if due:
+            self.eval_seconds += time.perf_counter() - start
+            returns, lengths = self.evaluations_results[-1], self.evaluations_length[-1]
+            row = {
+                "env_steps": self.num_timesteps,
+                "wall_s": round(self.train_seconds(), 3),
+                "wall_total_s": round(time.perf_counter() - self._start, 3),
+                "mean_return": float(np.mean(returns)),
+                "std_return": float(np.std(returns)),
+                "mean_ep_length": float(np.mean(lengths)),
+            }
+            self.rows.append(row)
+            with self.csv_path.open("a", newline="") as f:
+                csv.DictWriter(f, CSV_FIELDS).writerow(row)
+            self.progress.update(self.num_timesteps, self.train_seconds(), self.last_mean_reward, force=True)
+        return continue_training
+
+    def _on_training_start(self) -> None:
+        super()._on_training_start()
+        with self.csv_path.open("w", newline="") as f:
+            csv.DictWriter(f, CSV_FIELDS).writeheader()
+        self._start = time.perf_counter()
+        self._evaluate(force=True)
+
+    def _on_step(self) -> bool:
+        continue_training = self._evaluate(force=False)
+        train_s = self.train_seconds()
+        self.progress.update(self.num_timesteps, train_s, self.rows[-1]["mean_return"] if self.rows else None)
+        if self.budget_seconds is not None and train_s >= self.budget_seconds:
+            return False
+        return continue_training
+
+    def _on_training_end(self) -> None:
+        if not self.rows or self.rows[-1]["env_steps"] != self.num_timesteps:
+            self._evaluate(force=True)
+        self.progress.update(self.num_timesteps, self.train_seconds(), self.last_mean_reward, force=True)
+        super()._on_training_end()
+
+
+# ---------------------------------------------------------------------------------------------- one run
+def run_one(
+    algo: str,
+    env_id: str,
+    seed: int,
+    out: Path,
+    steps: int | None,
+    seconds: float | None,
+    eval_freq: int,
+    eval_episodes: int,
+    label: str,
+    verbose: int = 0,
+    overrides: dict[str, Any] | None = None,
+    command: str = "",
+) -> dict[str, Any]:
+    """
+    Train one (algorithm, env, seed) run through rl-zoo's ExperimentManager and record its evaluations.
+
+    :param algo: Algorithm name (key of rl-zoo's ``ALGOS`` after :func:`sb3_es.zoo.register`).
+    :param env_id: Env id.
+    :param seed: Seed.
+    :param out: Output folder.
+    :param steps: Env-step budget (None: the config's ``n_timesteps``, used with ``seconds``).
+    :param seconds: Training wall-clock budget in seconds (None: no limit).
+    :param eval_freq: Env steps between evaluations (0: start and end only).
+    :param eval_episodes: Episodes per evaluation.
+    :param label: Progress label.
+    :param verbose: Verbosity of the model (0: progress line only).
+    :param overrides: Hyperparameters replacing the config's (as rl-zoo's ``-params``).
+    :param command: Command line of the comparison, for the record.
+    :return: The run summary (also written to ``summary.json``).
+    """
+    config, note = config_for(algo, env_id, out)
+    run_dir = out / "runs" / env_slug(env_id) / algo / f"seed{seed}"
+    run_dir.mkdir(parents=True, exist_ok=True)
+    args = argparse.Namespace(
+        algo=algo, env=env_id, seed=seed, n_timesteps=steps or -1, conf_file=str(config), env_kwargs=None
+    )
+    set_random_seed(seed)
+    manager = ExperimentManager(
+        args,
+        algo,
+        env_id,
+        str(out / "logs"),
+        tensorboard_log=str(out / "tb"),
+        n_timesteps=steps or 0,
+        eval_freq=-1,
+        seed=seed,
+        verbose=verbose,
+        config=str(config),
+        hyperparams=dict(overrides) if overrides else None,
+    )
+    if overrides:
+        note += f"; overridden: {', '.join(f'{k}={v}' for k, v in overrides.items())}"
+    setup_log = io.StringIO()
+    with contextlib.redirect_stdout(setup_log if verbose == 0 else sys.stdout):
+        result = manager.setup_experiment()
+    (run_dir / "setup.txt").write_text(setup_log.getvalue())
+    assert result is not None
+    model, hyperparams = result
+    total = manager.n_timesteps
+    progress = Progress(label, total if steps else None, seconds)
+    n_envs = model.get_env().num_envs  # type: ignore[union-attr]
+    recorder = RecordingEvalCallback(
+        manager.create_envs(1, eval_env=True),
+        run_dir / "eval.csv",
+        eval_freq=max(eval_freq // n_envs, 1) if eval_freq > 0 else 0,
+        n_eval_episodes=eval_episodes,
+        log_path=str(run_dir),
+        budget_seconds=seconds,
+        progress=progress,
+    )
+    start = time.perf_counter()
+    try:
+        model.learn(total, callback=[*manager.callbacks, recorder], tb_log_name=type(model).__name__)
+    finally:
+        progress.close()
+    total_s = time.perf_counter() - start
+    with contextlib.redirect_stdout(io.StringIO()):
+        manager.save_trained_model(model)
+    tb_dir = model.logger.get_dir()
+    model.get_env().close()  # type: ignore[union-attr]
+    recorder.eval_env.close()
+    returns = [row["mean_return"] for row in recorder.rows]
+    summary = {
+        "algo": algo,
+        "algorithm": type(model).__name__,
+        "env": env_id,
+        "seed": seed,
+        "env_steps": int(model.num_timesteps),
+        "train_seconds": round(recorder.train_seconds(), 2),
+        "total_seconds": round(total_s, 2),
+        "final_return": returns[-1],
+        "best_return": max(returns),
+        "n_envs": n_envs,
+        "torch_threads": torch.get_num_threads(),
+        "budget_steps": steps,
+        "budget_seconds": seconds,
+        "eval_freq": eval_freq,
+        "eval_episodes": eval_episodes,
+        "hyperparams_source": note,
+        "config": str(config),
+        "hyperparams": {k: str(v) for k, v in hyperparams.items()},
+        "tensorboard_dir": tb_dir,
+        "model": f"{manager.save_path}/{manager.env_name}.zip",
+        "csv": str(run_dir / "eval.csv"),
+        "command": command,
+        "date": time.strftime("%Y-%m-%d %H:%M %Z"),
+        "hardware": hardware(),
+    }
+    (run_dir / "summary.json").write_text(json.dumps(summary, indent=2))
+    return summary
+
+
+# ---------------------------------------------------------------------------------------------- report
+def load_runs(out: Path) -> list[dict[str, Any]]:
+    """
+    Every finished run in an output folder, with its evaluation rows.
+
+    :param out: Output folder.
+    :return: Run summaries, each with a ``rows`` list.
+    """
+    runs = []
+    for summary_path in sorted((out / "runs").glob("*/*/seed*/summary.json")):
+        summary = json.loads(summary_path.read_text())
+        with (summary_path.parent / "eval.csv").open() as f:
+            summary["rows"] = [{k: float(v) for k, v in row.items()} for row in csv.DictReader(f)]
+        runs.append(summary)
+    return runs
+
+
+def aggregate(curves: list[tuple[np.ndarray, np.ndarray]], n_points: int = 200) -> tuple[np.ndarray, ...]:
+    """
+    Mean, min, max and std over seeds of curves sampled at different x, on a common grid.
+
+    Each curve is interpolated linearly inside its own x range only; a grid point uses the seeds
+    whose range covers it (``count`` says how many).
+
+    :param curves: ``(x, y)`` per seed, x increasing.
+    :param n_points: Grid size.
+    :return: ``grid, mean, low, high, std, count``.
+    """
+    x_max = max(float(x[-1]) for x, _ in curves)
+    grid = np.linspace(0.0, x_max, n_points)
+    values = np.full((len(curves), n_points), np.nan)
+    for i, (x, y) in enumerate(curves):
+        inside = (grid >= x[0]) & (grid <= x[-1])
+        values[i, inside] = np.interp(grid[inside], x, y)
+    count = np.sum(~np.isnan(values), axis=0)
+    with warnings.catch_warnings():  # all-NaN columns (no seed covers the point) give NaN, as intended
+        warnings.simplefilter("ignore", RuntimeWarning)
+        mean = np.nanmean(values, axis=0)
+        low, high = np.nanmin(values, axis=0), np.nanmax(values, axis=0)
+        std = np.nanstd(values, axis=0)
+    return grid, mean, low, high, std, count
+
+
+def plot_env(env_id: str, runs: list[dict[str, Any]], path: Path, band: str) -> None:
+    """
+    One PNG: mean return against env steps (left) and against training wall-clock (right), band over seeds.
+
+    :param env_id: Env id (title).
+    :param runs: The env's runs.
+    :param path: PNG path.
+    :param band: ``"minmax"`` or ``"std"``.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(12, 4.5))
+    by_algo: dict[str, list[dict[str, Any]]] = defaultdict(list)
+    for run in runs:
+        by_algo[run["algorithm"]].append(run)
+    for color_index, (name, algo_runs) in enumerate(sorted(by_algo.items())):
+        color = f"C{color_index}"
+        for ax, key in zip(axes, ("env_steps", "wall_s")):
+            curves = [
+                (np.array([r[key] for r in run["rows"]]), np.array([r["mean_return"] for r in run["rows"]]))
+                for run in algo_runs
+                if run["rows"]
+            ]
+            if not curves:
+                continue
+            grid, mean, low, high, std, count = aggregate(curves)
+            shown = count == len(curves)  # where every seed has data: no jumps where one seed ends early
+            seeds = f"{len(curves)} seed" + ("s" if len(curves) > 1 else "")
+            ax.plot(grid[shown], mean[shown], color=color, label=f"{name} ({seeds})")
+            if len(curves) > 1:
+                lo, hi = (low, high) if band == "minmax" else (mean - std, mean + std)
+                ax.fill_between(grid[shown], lo[shown], hi[shown], color=color, alpha=0.2, linewidth=0)
+    band_text = "min-max over seeds" if band == "minmax" else "mean ± std over seeds"
+    for ax, xlabel in zip(axes, ("env steps", "training wall-clock (s), evaluations excluded")):
+        ax.set_xlabel(xlabel)
+        ax.set_ylabel("mean evaluation return")
+        ax.grid(alpha=0.3)
+    axes[0].legend(loc="best", fontsize="small")
+    fig.suptitle(f"{env_id}: mean over seeds, band {band_text} (drawn where every seed has data)")
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+def _mean_std(values: list[float]) -> str:
+    if len(values) == 1:
+        return f"{values[0]:.1f}"
+    return f"{np.mean(values):.1f} ± {np.std(values):.1f}"
+
+
+def hardware() -> str:
+    """
+    One line describing this machine.
+
+    :return: CPU model, core count, OS.
+    """
+    cpu = platform.processor() or platform.machine()
+    with contextlib.suppress(OSError):
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    system = f"{platform.system()} {platform.release()}, Python {platform.python_version()}"
+    return f"{cpu}, {os.cpu_count()} logical CPUs, {system}"
+
+
+def write_report(out: Path, runs: list[dict[str, Any]], thresholds: dict[str, float], band: str, command: str) -> Path:
+    """
+    Plots (one PNG per env) and ``results.md``.
+
+    :param out: Output folder.
+    :param runs: Runs from :func:`load_runs`.
+    :param thresholds: Return thresholds per env id, for the time-to-threshold column.
+    :param band: ``"minmax"`` or ``"std"``.
+    :param command: Command line, for the record.
+    :return: Path of ``results.md``.
+    """
+    import stable_baselines3
+
+    import sb3_es
+
+    dates = [r.get("date") or "?" for r in runs]
+    lines = [
+        "# Benchmark results",
+        "",
+        *[f"- Training command: `{c}`" for c in sorted({r.get("command") or "?" for r in runs})],
+        f"- Report command: `{command}`",
+        *[f"- Hardware: {h}" for h in sorted({r.get("hardware") or hardware() for r in runs})],
+        f"- Versions: sb3-es {sb3_es.__version__}, Stable-Baselines3 {stable_baselines3.__version__}, "
+        f"rl-zoo3 {rl_zoo3.__version__}, torch {torch.__version__}, gymnasium {gym.__version__}",
+        f"- Runs dated: {min(dates)} to {max(dates)}",
+        "- Returns: mean over the evaluation episodes of the deterministic policy; across seeds, mean ± std.",
+        "  *final*: last evaluation; *best*: best evaluation during training; wall-clock excludes evaluations.",
+        "",
+    ]
+    by_env: dict[str, list[dict[str, Any]]] = defaultdict(list)
+    for run in runs:
+        by_env[run["env"]].append(run)
+    for env_id, env_runs in sorted(by_env.items()):
+        png = out / "plots" / f"{env_slug(env_id)}.png"
+        plot_env(env_id, env_runs, png, band)
+        threshold = thresholds.get(env_id)
+        header = "| algorithm | seeds | env steps | train wall-clock (s) | final return | best return |"
+        rule = "|---|---|---|---|---|---|"
+        if threshold is not None:
+            header += f" time to return ≥ {threshold:g} |"
+            rule += "---|"
+        budgets = sorted(
+            {
+                (r["budget_steps"] or 0, r["budget_seconds"] or 0, r["eval_freq"], r["eval_episodes"])
+                + (r.get("torch_threads", "?"),)
+                for r in env_runs
+            }
+        )
+        lines += [f"## {env_id}", ""]
+        for b_steps, b_seconds, freq, episodes, threads in budgets:
+            budget = " and ".join(
+                x for x in (f"{b_steps:,} env steps" if b_steps else "", f"{b_seconds:g} s" if b_seconds else "") if x
+            )
+            lines.append(
+                f"Budget: {budget}; evaluation every {freq:,} env steps, {episodes} episodes; torch threads: {threads}."
+            )
+        lines += ["", header, rule]
+        by_algo: dict[str, list[dict[str, Any]]] = defaultdict(list)
+        for run in env_runs:
+            by_algo[run["algorithm"]].append(run)
+        for name, algo_runs in sorted(by_algo.items()):
+            seeds = ", ".join(str(r["seed"]) for r in sorted(algo_runs, key=lambda r: r["seed"]))
+            row = (
+                f"| {name} | {len(algo_runs)} ({seeds}) | {np.mean([r['env_steps'] for r in algo_runs]):,.0f} "
+                f"| {np.mean([r['train_seconds'] for r in algo_runs]):,.1f} "
+                f"| {_mean_std([r['final_return'] for r in algo_runs])} "
+                f"| {_mean_std([r['best_return'] for r in algo_runs])} |"
+            )
+            if threshold is not None:
+                reached = []
+                for run in algo_runs:
+                    hit = next((r for r in run["rows"] if r["mean_return"] >= threshold), None)
+                    if hit is not None:
+                        reached.append((hit["wall_s"], hit["env_steps"]))
+                if reached:
+                    row += (
+                        f" {np.mean([w for w, _ in reached]):,.0f} s, {np.mean([s for _, s in reached]):,.0f} steps "
+                        f"({len(reached)}/{len(algo_runs)} seeds) |"
+                    )
+                else:
+                    row += f" not reached (0/{len(algo_runs)} seeds) |"
+            lines.append(row)
+        sources = sorted({f"{r['algorithm']}: {r['hyperparams_source']}" for r in env_runs})
+        lines += ["", "Hyperparameters: " + "; ".join(sources) + ".", "", f"![{env_id}](plots/{png.name})", ""]
+    path = out / "results.md"
+    path.write_text("\n".join(lines))
+    return path
+
+
+# ---------------------------------------------------------------------------------------------- main
+def parse_overrides(items: list[str]) -> dict[str, dict[str, Any]]:
+    """
+    Parse ``ALGO:KEY=VALUE`` items (values read as YAML: numbers, booleans, ``lin_0.01``, ``"dict(...)"``).
+
+    :param items: Items from the command line.
+    :return: Overrides per algorithm.
+    """
+    overrides: dict[str, dict[str, Any]] = defaultdict(dict)
+    for item in items:
+        target, sep, value = item.partition("=")
+        algo, colon, key = target.partition(":")
+        if not sep or not colon or not algo or not key:
+            raise SystemExit(f"--override {item!r}: use ALGO:KEY=VALUE, e.g. ppo:n_steps=256")
+        overrides[algo][key] = yaml.safe_load(value)
+    return dict(overrides)
+
+
+def parse_thresholds(items: list[str]) -> dict[str, float]:
+    """
+    Parse ``ENV=VALUE`` items.
+
+    :param items: Items from the command line.
+    :return: Threshold per env id.
+    """
+    thresholds = {}
+    for item in items:
+        env_id, sep, value = item.rpartition("=")
+        if not sep:
+            raise SystemExit(f"--threshold {item!r}: use ENV_ID=VALUE, e.g. Pendulum-v1=-200")
+        thresholds[env_id] = float(value)
+    return thresholds
+
+
+def main(argv: list[str] | None = None) -> Path:
+    """
+    Run the comparison and write the report.
+
+    :param argv: Arguments (defaults to ``sys.argv[1:]``).
+    :return: Path of ``results.md``.
+    """
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--algos", nargs="+", default=list(DEFAULT_ALGOS), help="rl-zoo algorithm names")
+    parser.add_argument("--envs", nargs="+", default=["Pendulum-v1"], help="gymnasium env ids")
+    parser.add_argument("--seeds", nargs="+", type=int, default=[0])
+    parser.add_argument("--steps", type=int, default=None, help="env-step budget per run")
+    parser.add_argument("--seconds", type=float, default=None, help="training wall-clock budget per run")
+    parser.add_argument("--eval-freq", type=int, default=10_000, help="env steps between evaluations (0: end only)")
+    parser.add_argument("--eval-episodes", type=int, default=5)
+    parser.add_argument("--out", default="results/compare", help="output folder")
+    parser.add_argument("--band", choices=["minmax", "std"], default="minmax", help="band over seeds in the plots")
+    parser.add_argument("--threshold", nargs="*", default=[], help="ENV_ID=RETURN for the time-to-threshold column")
+    parser.add_argument("--skip-existing", action="store_true", help="skip runs that already have a summary.json")
+    parser.add_argument("--keep-going", action="store_true", help="record a failed run and go on with the others")
+    parser.add_argument("--report-only", action="store_true", help="only redraw plots and table from existing runs")
+    parser.add_argument(
+        "--num-threads",
+        type=int,
+        default=1,
+        help="torch threads (default 1: small networks on a CPU train faster single-threaded; -1: torch's default)",
+    )
+    parser.add_argument("--verbose", type=int, default=0, help="model verbosity (0: progress line only)")
+    parser.add_argument(
+        "--override", nargs="*", default=[], help="ALGO:KEY=VALUE hyperparameter overrides, e.g. ppo:n_steps=256"
+    )
+    args = parser.parse_args(argv)
+    out = Path(args.out)
+    thresholds = parse_thresholds(args.threshold)
+    overrides = parse_overrides(args.override)
+    given = argv if argv is not None else sys.argv[1:]
+    command = "python benchmarks/compare.py " + " ".join(shlex.quote(a) for a in given)
+    register()
+    if not args.report_only:
+        if args.steps is None and args.seconds is None:
+            raise SystemExit("Give a budget: --steps N (env steps), --seconds S (training wall-clock), or both.")
+        if args.num_threads > 0:
+            torch.set_num_threads(args.num_threads)
+        algos = rl_zoo3.ALGOS
+        missing = [a for a in args.algos if a not in algos]
+        if missing:
+            print(f"Skipping unknown or unavailable algorithms: {missing} (known: {sorted(algos)})")
+        plan = [(e, a, s) for e in args.envs for a in args.algos if a in algos for s in args.seeds]
+        start = time.perf_counter()
+        failures: list[str] = []
+        for i, (env_id, algo, seed) in enumerate(plan, 1):
+            run_dir = out / "runs" / env_slug(env_id) / algo / f"seed{seed}"
+            label = f"[{i}/{len(plan)}] {algo} {env_id} seed {seed}"
+            if args.skip_existing and (run_dir / "summary.json").is_file():
+                print(f"{label}: done already, skipped")
+                continue
+            try:
+                summary = run_one(
+                    algo,
+                    env_id,
+                    seed,
+                    out,
+                    args.steps,
+                    args.seconds,
+                    args.eval_freq,
+                    args.eval_episodes,
+                    label,
+                    verbose=args.verbose,
+                    overrides=overrides.get(algo),
+                    command=command,
+                )
+            except Exception:
+                if not args.keep_going:
+                    raise
+                failures.append(label)
+                run_dir.mkdir(parents=True, exist_ok=True)
+                (run_dir / "error.txt").write_text(traceback.format_exc())
+                print(f"{label}: FAILED, see {run_dir / 'error.txt'}")
+                continue
+            print(
+                f"{label}: {summary['env_steps']:,} steps in {summary['train_seconds']:,.0f} s, "
+                f"final {summary['final_return']:.1f}, best {summary['best_return']:.1f}"
+            )
+        print(f"{len(plan)} runs in {time.perf_counter() - start:,.0f} s")
+        if failures:
+            print(f"{len(failures)} failed: {failures}")
+    runs = load_runs(out)
+    if not runs:
+        raise SystemExit(f"No finished runs under {out / 'runs'}.")
+    report = write_report(out, runs, thresholds, args.band, command)
+    print(f"Report: {report}\nPlots: {out / 'plots'}\nTensorBoard: tensorboard --logdir {out / 'tb'}")
+    return report
+
+
+if __name__ == "__main__":
+    main()
