@@ -11,9 +11,10 @@ from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedul
 from stable_baselines3.common.utils import FloatSchedule
 
 from sb3_es.ars.policies import FlatPolicy, LinearPolicy, MlpPolicy
-from sb3_es.common.population_algorithm import PopulationAlgorithm, check_positive
+from sb3_es.common.population_algorithm import PopulationAlgorithm, check_positive, make_noise_table
 from sb3_es.evaluation import PopulationEvaluator
 from sb3_es.strategies import ARSStrategy
+from sb3_es.strategies.noise import NoiseTablePopulation
 
 SelfARS = TypeVar("SelfARS", bound="ARS")
 
@@ -43,6 +44,9 @@ class ARS(PopulationAlgorithm):
     :param verbose: 0 none, 1 training information, 2 debug.
     :param device: Torch device (the CPU is the right choice for these policies).
     :param evaluator: ``"local"`` or a :class:`~sb3_es.evaluation.PopulationEvaluator` (e.g. Ray); not saved.
+    :param noise_table_size: Read perturbations from a shared noise table of this many float32 values (e.g.
+        ``2**24``) instead of drawing them fresh, so that a Ray evaluator sends an offset per candidate
+        rather than a parameter vector. ``None`` (default) draws them fresh.
     :param _init_setup_model: Whether to build the model at construction.
     """
 
@@ -71,6 +75,7 @@ class ARS(PopulationAlgorithm):
         verbose: int = 0,
         device: th.device | str = "cpu",
         evaluator: str | PopulationEvaluator = "local",
+        noise_table_size: int | None = None,
         _init_setup_model: bool = True,
     ) -> None:
         if int(n_delta) != n_delta or n_delta < 1:
@@ -98,13 +103,17 @@ class ARS(PopulationAlgorithm):
         self.n_top = int(n_top)
         self.delta_std = delta_std
         self.delta_std_schedule = FloatSchedule(delta_std)
+        if noise_table_size is not None and int(noise_table_size) < 1:
+            raise ValueError(f"noise_table_size={noise_table_size}: use a positive size or None.")
+        self.noise_table_size = noise_table_size
         if _init_setup_model:
             self._setup_model()
 
     def _make_strategy(self, center: np.ndarray, seed: np.random.SeedSequence) -> ARSStrategy:
-        return ARSStrategy(center, self.n_delta, self.n_top, seed=seed)  # type: ignore[arg-type]
+        table = make_noise_table(self.noise_table_size, seed)
+        return ARSStrategy(center, self.n_delta, self.n_top, seed=seed, noise_table=table)  # type: ignore[arg-type]
 
-    def _ask(self) -> np.ndarray:
+    def _ask(self) -> np.ndarray | NoiseTablePopulation:
         progress = self._current_progress_remaining
         self.strategy.delta_std = float(self.delta_std_schedule(progress))
         self.strategy.learning_rate = float(self.lr_schedule(progress))

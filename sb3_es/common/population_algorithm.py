@@ -24,6 +24,7 @@ from stable_baselines3.common.utils import safe_mean
 from sb3_es.common.policies import FlatPolicy, LinearPolicy, MlpPolicy
 from sb3_es.evaluation import PopulationEvaluator, PopulationResult, VecEnvEvaluator
 from sb3_es.strategies import Strategy
+from sb3_es.strategies.noise import NoiseTablePopulation, SharedNoiseTable
 
 SelfPopulationAlgorithm = TypeVar("SelfPopulationAlgorithm", bound="PopulationAlgorithm")
 
@@ -62,6 +63,19 @@ def guess_foreign_algorithm(data: dict[str, Any]) -> str:
         if key in data:
             return name
     return "another library or algorithm"
+
+
+def make_noise_table(size: int | None, seed: np.random.SeedSequence) -> SharedNoiseTable | None:
+    """
+    Build the shared noise table of a strategy, if one was asked for.
+
+    :param size: Number of float32 values, or ``None`` for no table (directions drawn fresh).
+    :param seed: Seed sequence of the strategy (the table's seed is derived from it).
+    :return: The table, or ``None``.
+    """
+    if size is None:
+        return None
+    return SharedNoiseTable(size, seed=int(seed.generate_state(1)[0]))
 
 
 def check_save_file(path: str | pathlib.Path | io.BufferedIOBase, algorithm: str) -> None:
@@ -137,8 +151,10 @@ class PopulationAlgorithm(BaseAlgorithm):
     :param seed: Seed for the strategy, the environments and torch.
     :param verbose: 0 none, 1 training information, 2 debug.
     :param device: Torch device; the CPU is the right choice for small policies.
-    :param evaluator: Who runs the candidates: ``"local"`` (the model's VecEnv, in this process) or a
-        :class:`~sb3_es.evaluation.PopulationEvaluator` instance. Not saved with the model.
+    :param evaluator: Who runs the candidates: ``"local"`` (the model's VecEnv, in this process), ``"ray"``
+        (Ray actors, one per available CPU, building their envs from ``env``, which must then be an env id;
+        see :class:`~sb3_es.evaluation.ray.RayEvaluator`) or a :class:`~sb3_es.evaluation.PopulationEvaluator`
+        instance. Not saved with the model.
     :param _init_setup_model: Whether to build the model at construction.
     """
 
@@ -166,6 +182,8 @@ class PopulationAlgorithm(BaseAlgorithm):
         evaluator: str | PopulationEvaluator = "local",
         _init_setup_model: bool = True,
     ) -> None:
+        # Env id, for evaluator="ray" (each Ray actor builds its envs from it); not saved.
+        self._env_id = env if isinstance(env, str) else None
         if isinstance(policy, str):
             # Resolve aliases here: SB3 rejects the alias "MlpPolicy" for Dict observations, which we flatten.
             policy = self._get_policy_from_name(policy)  # type: ignore[assignment]
@@ -190,8 +208,13 @@ class PopulationAlgorithm(BaseAlgorithm):
         self._algorithm_name = type(self).__name__
         self.strategy: Strategy | None = None
         self._env_rng: np.random.Generator | None = None
-        if not (evaluator == "local" or isinstance(evaluator, PopulationEvaluator)):
-            raise ValueError(f"evaluator={evaluator!r}: use 'local' or a PopulationEvaluator instance.")
+        if not (isinstance(evaluator, PopulationEvaluator) or evaluator in ("local", "ray")):
+            raise ValueError(f"evaluator={evaluator!r}: use 'local', 'ray' or a PopulationEvaluator instance.")
+        if evaluator == "ray" and self._env_id is None:
+            raise ValueError(
+                "evaluator='ray' builds the Ray actors' envs from an env id, but env is not a string: pass the env "
+                "id (env='BipedalWalker-v3'), or evaluator=RayEvaluator(env_factory) from sb3_es.evaluation.ray."
+            )
         self.evaluator = evaluator
         self._evaluator: PopulationEvaluator | None = None
         self._stop_training = False
@@ -221,7 +244,7 @@ class PopulationAlgorithm(BaseAlgorithm):
         :return: The strategy.
         """
 
-    def _ask(self) -> np.ndarray:
+    def _ask(self) -> np.ndarray | NoiseTablePopulation:
         """
         Set schedule-driven hyperparameters on the strategy, then ask it for candidates.
 
@@ -231,7 +254,7 @@ class PopulationAlgorithm(BaseAlgorithm):
         return self.strategy.ask()
 
     def _excluded_save_params(self) -> list[str]:
-        return [*super()._excluded_save_params(), "evaluator", "_evaluator"]
+        return [*super()._excluded_save_params(), "evaluator", "_evaluator", "_env_id"]
 
     def set_parameters(
         self,
@@ -278,6 +301,18 @@ class PopulationAlgorithm(BaseAlgorithm):
     def _get_evaluator(self) -> PopulationEvaluator:
         if isinstance(self.evaluator, PopulationEvaluator):
             return self.evaluator
+        if self.evaluator == "ray":
+            from sb3_es.evaluation.ray import RayEvaluator  # Ray is optional: imported only when asked for
+
+            if not isinstance(self._evaluator, RayEvaluator):
+                env_id = getattr(self, "_env_id", None)
+                if env_id is None:
+                    raise ValueError(
+                        "evaluator='ray' needs the env id the model was created with (it is not saved): set "
+                        "model.evaluator = RayEvaluator('EnvId') (from sb3_es.evaluation.ray) before learn()."
+                    )
+                self._evaluator = RayEvaluator(env_id)
+            return self._evaluator
         if self.env is None:
             raise ValueError("This model has no environment: pass env= to load() or call set_env() before learn().")
         if not isinstance(self._evaluator, VecEnvEvaluator) or self._evaluator.env is not self.env:

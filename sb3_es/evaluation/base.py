@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from sb3_es.common.policies import FlatPolicy
+from sb3_es.strategies.noise import NoiseTablePopulation
 
 #: Called once per vec step with ``(n_envs, infos, dones)``; returning False stops the evaluation.
 StepHook = Callable[[int, list[dict[str, Any]], np.ndarray], bool]
@@ -94,7 +95,7 @@ class PopulationEvaluator(ABC):
     def evaluate(
         self,
         policy: FlatPolicy,
-        population: np.ndarray,
+        population: np.ndarray | NoiseTablePopulation,
         center: np.ndarray,
         n_episodes: int,
         seed: int,

@@ -30,7 +30,6 @@ import logging
 import time
 import weakref
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
 from typing import Any
 
 import gymnasium as gym
@@ -42,6 +41,7 @@ from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv
 from sb3_es.common.policies import FlatPolicy
 from sb3_es.evaluation.base import ObsStats, PopulationEvaluator, PopulationResult, StepHook
 from sb3_es.evaluation.vec_env import VecEnvEvaluator
+from sb3_es.strategies.noise import NoiseTablePopulation, noise_rows
 
 logger = logging.getLogger(__name__)
 
@@ -59,116 +59,6 @@ def _import_ray() -> Any:
             "RayEvaluator needs Ray: install it with `pip install sb3-es[ray]` (or `pip install ray`)."
         ) from e
     return ray
-
-
-# ---------------------------------------------------------------------------------------------------- noise table
-class SharedNoiseTable:
-    """
-    A block of standard normal noise, generated from a seed, from which perturbations are read as slices.
-
-    As in the OpenAI ES and ARS reference implementations, a strategy can describe a candidate as
-    ``center + scale * table[offset:offset + num_params]`` and send only ``offset`` and ``scale``: the table
-    is put once in Ray's object store and shared by every actor of a node. Pickling keeps only the size and
-    seed (the table is regenerated on unpickling), so a strategy holding one saves in a few bytes.
-
-    :param size: Number of float32 values (``2**25`` = 128 MiB by default).
-    :param seed: Seed of the generator that fills the table.
-    """
-
-    def __init__(self, size: int = 2**25, seed: int = 0) -> None:
-        if int(size) <= 0:
-            raise ValueError(f"size={size}: the noise table needs a positive size.")
-        self.size = int(size)
-        self.seed = int(seed)
-        self.noise = np.random.default_rng(self.seed).standard_normal(self.size, dtype=np.float32)
-        self.noise.flags.writeable = False
-
-    @property
-    def key(self) -> tuple[int, int]:
-        """:return: ``(size, seed)``, which identifies the table's content."""
-        return self.size, self.seed
-
-    def get(self, offset: int, dim: int) -> np.ndarray:
-        """
-        :param offset: Start of the slice.
-        :param dim: Length of the slice.
-        :return: A read-only view ``table[offset:offset + dim]``.
-        """
-        return self.noise[offset : offset + dim]
-
-    def sample_offsets(self, rng: np.random.Generator, dim: int, n: int) -> np.ndarray:
-        """
-        :param rng: Random generator (the strategy's, so runs stay reproducible).
-        :param dim: Length of each slice (the number of parameters).
-        :param n: Number of offsets.
-        :return: ``n`` offsets such that every slice fits in the table.
-        """
-        if dim > self.size:
-            raise ValueError(f"The noise table ({self.size} values) is smaller than one perturbation ({dim}).")
-        return rng.integers(0, self.size - dim + 1, size=n)
-
-    def __getstate__(self) -> dict[str, int]:
-        return {"size": self.size, "seed": self.seed}
-
-    def __setstate__(self, state: dict[str, int]) -> None:
-        self.__init__(state["size"], state["seed"])  # type: ignore[misc]
-
-
-def noise_rows(noise: np.ndarray, center: np.ndarray, offsets: np.ndarray, scales: np.ndarray) -> np.ndarray:
-    """
-    Rebuild candidates ``center + scales[i] * noise[offsets[i]:offsets[i] + dim]`` (float64).
-
-    :param noise: The noise table's values.
-    :param center: Center ``(dim,)``.
-    :param offsets: Offsets ``(n,)``.
-    :param scales: Signed scales ``(n,)`` (e.g. ``+sigma`` and ``-sigma`` for antithetic pairs).
-    :return: Candidates ``(n, dim)``.
-    """
-    center = np.asarray(center, dtype=np.float64)
-    dim = center.shape[0]
-    rows = np.empty((len(offsets), dim))
-    for i, (offset, scale) in enumerate(zip(np.asarray(offsets).tolist(), np.asarray(scales).tolist())):
-        rows[i] = center + scale * noise[offset : offset + dim].astype(np.float64)
-    return rows
-
-
-@dataclass
-class NoiseTablePopulation:
-    """
-    A population described by offsets into a :class:`SharedNoiseTable`: row ``i`` is
-    ``center + scales[i] * table[offsets[i]:offsets[i] + dim]``.
-
-    It behaves as the dense ``(n, dim)`` array for the local engine (``shape``, ``np.asarray``), and
-    :class:`RayEvaluator` sends only ``offsets`` and ``scales`` to its actors.
-
-    :param table: The noise table.
-    :param center: Center of the population ``(dim,)``.
-    :param offsets: Offset of each candidate's noise ``(n,)``.
-    :param scales: Signed scale of each candidate's noise ``(n,)``.
-    """
-
-    table: SharedNoiseTable
-    center: np.ndarray
-    offsets: np.ndarray
-    scales: np.ndarray
-    _dense: np.ndarray | None = field(default=None, repr=False)
-
-    @property
-    def shape(self) -> tuple[int, int]:
-        """:return: ``(n_candidates, dim)``, as the dense population."""
-        return len(self.offsets), int(np.asarray(self.center).shape[0])
-
-    def __len__(self) -> int:
-        return len(self.offsets)
-
-    def dense(self) -> np.ndarray:
-        """:return: The candidates as a float64 array ``(n, dim)`` (computed once)."""
-        if self._dense is None:
-            self._dense = noise_rows(self.table.noise, self.center, self.offsets, self.scales)
-        return self._dense
-
-    def __array__(self, dtype: Any = None, copy: bool | None = None) -> np.ndarray:
-        return self.dense() if dtype is None else self.dense().astype(dtype)
 
 
 # ---------------------------------------------------------------------------------------------------- actor side
@@ -236,8 +126,9 @@ class _Worker:
         policy = self.policy
         if policy is None:
             raise RuntimeError("set_policy() must be called before evaluate().")
-        policy.obs_mean.copy_(th.as_tensor(payload["obs_mean"]))
-        policy.obs_var.copy_(th.as_tensor(payload["obs_var"]))
+        # The payload's arrays are read-only views into the object store: copy them into the buffers.
+        policy.obs_mean.copy_(th.from_numpy(np.array(payload["obs_mean"])))
+        policy.obs_var.copy_(th.from_numpy(np.array(payload["obs_var"])))
         policy.obs_count.fill_(float(payload["obs_count"]))
         center = payload["center"]
         if payload["population"] is not None:
@@ -286,9 +177,11 @@ class RayEvaluator(PopulationEvaluator):
     The generation's (candidate, episode) jobs, ordered episode by episode as in the local engine, are cut into
     ``num_workers`` contiguous shares of nearly equal size; share ``k`` runs on actor ``k`` with env seed
     ``seed + k * envs_per_worker``, so the env slots of the cluster get the seeds a local VecEnv of
-    ``num_workers * envs_per_worker`` envs would get, and a result does not depend on which actor process runs
-    a share (a replaced actor re-runs it identically). With one worker, the results are those of the local
-    engine on a VecEnv of ``envs_per_worker`` envs, bit for bit.
+    ``num_workers * envs_per_worker`` envs would get. For envs whose episodes depend only on the reset seed, a
+    result does not depend on which actor process runs a share (a replaced actor re-runs it identically), and
+    with one worker the results are those of the local engine on a VecEnv of ``envs_per_worker`` envs, bit for
+    bit. (Box2D envs such as BipedalWalker keep their physics world across resets, so their episodes also depend,
+    slightly, on what the env ran before, locally as remotely.)
 
     Callbacks: remote steps cannot call the driver's callbacks, so when the results are back the step hook is
     replayed once per remote vec step (the actors' steps interleaved, with each actor's ``n_envs``, its real
@@ -398,7 +291,11 @@ class RayEvaluator(PopulationEvaluator):
         if not self._atexit_registered:
             atexit.register(self.close)
             self._atexit_registered = True
-        ray.get([actor.ready.remote() for actor in self._actors])
+        try:
+            ray.get([actor.ready.remote() for actor in self._actors])
+        except BaseException:  # e.g. the env cannot be built: report it, and start afresh next time
+            self._kill_actors()
+            raise
 
     def _new_actor(self) -> Any:
         cls = _remote_worker_class()

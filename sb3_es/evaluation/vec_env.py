@@ -9,6 +9,7 @@ from stable_baselines3.common.vec_env import VecEnv
 
 from sb3_es.common.policies import FlatPolicy
 from sb3_es.evaluation.base import ObsStats, PopulationEvaluator, PopulationResult, StepHook
+from sb3_es.strategies.noise import NoiseTablePopulation
 
 
 class VecEnvEvaluator(PopulationEvaluator):
@@ -30,7 +31,7 @@ class VecEnvEvaluator(PopulationEvaluator):
     def evaluate(
         self,
         policy: FlatPolicy,
-        population: np.ndarray,
+        population: np.ndarray | NoiseTablePopulation,
         center: np.ndarray,
         n_episodes: int,
         seed: int,

@@ -9,9 +9,10 @@ import torch as th
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
 from stable_baselines3.common.utils import FloatSchedule
 
-from sb3_es.common.population_algorithm import PopulationAlgorithm, check_positive
+from sb3_es.common.population_algorithm import PopulationAlgorithm, check_positive, make_noise_table
 from sb3_es.evaluation import PopulationEvaluator
 from sb3_es.openes.policies import FlatPolicy
+from sb3_es.strategies.noise import NoiseTablePopulation
 from sb3_es.strategies.openes import FitnessShaping, OpenESStrategy
 
 SelfOpenES = TypeVar("SelfOpenES", bound="OpenES")
@@ -67,6 +68,9 @@ class OpenES(PopulationAlgorithm):
     :param verbose: Verbosity.
     :param device: Torch device.
     :param evaluator: ``"local"`` or a :class:`~sb3_es.evaluation.PopulationEvaluator` (e.g. Ray); not saved.
+    :param noise_table_size: Read perturbations from a shared noise table of this many float32 values (e.g.
+        ``2**24``) instead of drawing them fresh, so that a Ray evaluator sends an offset per candidate
+        rather than a parameter vector. ``None`` (default) draws them fresh.
     :param _init_setup_model: Whether to build the model at construction.
     """
 
@@ -99,6 +103,7 @@ class OpenES(PopulationAlgorithm):
         verbose: int = 0,
         device: th.device | str = "cpu",
         evaluator: str | PopulationEvaluator = "local",
+        noise_table_size: int | None = None,
         _init_setup_model: bool = True,
     ) -> None:
         check_positive("sigma", sigma)
@@ -132,6 +137,9 @@ class OpenES(PopulationAlgorithm):
         self.momentum = momentum
         self.weight_decay = weight_decay
         self.forget_best = forget_best
+        if noise_table_size is not None and int(noise_table_size) < 1:
+            raise ValueError(f"noise_table_size={noise_table_size}: use a positive size or None.")
+        self.noise_table_size = noise_table_size
         if _init_setup_model:
             self._setup_model()
 
@@ -146,9 +154,10 @@ class OpenES(PopulationAlgorithm):
             weight_decay=self.weight_decay,
             forget_best=self.forget_best,
             seed=seed,
+            noise_table=make_noise_table(self.noise_table_size, seed),
         )
 
-    def _ask(self) -> np.ndarray:
+    def _ask(self) -> np.ndarray | NoiseTablePopulation:
         progress, generation = self._current_progress_remaining, self._n_updates
         self.strategy.sigma = decayed(self.sigma, progress, generation, self.sigma_decay, self.sigma_limit)
         self.strategy.learning_rate = decayed(

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from sb3_es.strategies.base import Strategy, check_fitness
+from sb3_es.strategies.noise import NoiseTablePopulation, SharedNoiseTable
 
 
 class ARSStrategy(Strategy):
@@ -18,10 +19,21 @@ class ARSStrategy(Strategy):
     :param n_delta: Number of random directions per generation.
     :param n_top: Number of best directions used in the update (``b`` in the paper).
     :param seed: Seed of the random generator.
+    :param noise_table: Read the directions from this shared table (``ask()`` then returns a
+        :class:`~sb3_es.strategies.noise.NoiseTablePopulation`, which Ray ships as offsets) instead of
+        drawing them fresh.
     """
 
-    def __init__(self, center: np.ndarray, n_delta: int, n_top: int, seed: int | None = None) -> None:
+    def __init__(
+        self,
+        center: np.ndarray,
+        n_delta: int,
+        n_top: int,
+        seed: int | None = None,
+        noise_table: SharedNoiseTable | None = None,
+    ) -> None:
         super().__init__(center, seed)
+        self.noise_table = noise_table
         if n_delta < 1:
             raise ValueError(f"n_delta={n_delta}: it must be a positive integer.")
         if not 1 <= n_top <= n_delta:
@@ -37,7 +49,12 @@ class ARSStrategy(Strategy):
         """:return: ``2 * n_delta``."""
         return 2 * self.n_delta
 
-    def ask(self) -> np.ndarray:
+    def ask(self) -> np.ndarray | NoiseTablePopulation:
+        if self.noise_table is not None:
+            offsets = self.noise_table.sample_offsets(self.rng, self.num_params, self.n_delta)
+            self._deltas = np.stack([self.noise_table.get(o, self.num_params) for o in offsets]).astype(np.float64)
+            scales = np.repeat([self.delta_std, -self.delta_std], self.n_delta)
+            return NoiseTablePopulation(self.noise_table, self.center.copy(), np.tile(offsets, 2), scales)
         self._deltas = self.rng.standard_normal((self.n_delta, self.num_params))
         scaled = self.delta_std * self._deltas
         return np.concatenate([self.center + scaled, self.center - scaled])

@@ -6,6 +6,8 @@ from abc import ABC, abstractmethod
 
 import numpy as np
 
+from sb3_es.strategies.noise import NoiseTablePopulation
+
 
 class Strategy(ABC):
     """
@@ -29,8 +31,11 @@ class Strategy(ABC):
         return int(self.center.shape[0])
 
     @abstractmethod
-    def ask(self) -> np.ndarray:
-        """:return: The candidates to evaluate, ``(population_size, num_params)``."""
+    def ask(self) -> np.ndarray | NoiseTablePopulation:
+        """
+        :return: The candidates to evaluate, ``(population_size, num_params)``: an array, or a
+            :class:`~sb3_es.strategies.noise.NoiseTablePopulation` that behaves as one.
+        """
 
     @abstractmethod
     def tell(self, fitness: np.ndarray) -> dict[str, float]:

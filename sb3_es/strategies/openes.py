@@ -8,6 +8,7 @@ import numpy as np
 import torch as th
 
 from sb3_es.strategies.base import Strategy, check_fitness
+from sb3_es.strategies.noise import NoiseTablePopulation, SharedNoiseTable
 
 FitnessShaping = Literal["centered_rank", "zscore", "raw"]
 
@@ -60,6 +61,8 @@ class OpenESStrategy(Strategy):
     :param weight_decay: L2 coefficient added to the gradient.
     :param forget_best: Keep only the latest generation's best candidate.
     :param seed: Seed of the random generator.
+    :param noise_table: Read the perturbations from this shared table (``ask()`` then returns a
+        :class:`~sb3_es.strategies.noise.NoiseTablePopulation`, which Ray ships as offsets).
     """
 
     def __init__(
@@ -74,8 +77,10 @@ class OpenESStrategy(Strategy):
         weight_decay: float = 0.0,
         forget_best: bool = False,
         seed: int | np.random.SeedSequence | None = None,
+        noise_table: SharedNoiseTable | None = None,
     ) -> None:
         super().__init__(center, seed)  # type: ignore[arg-type]
+        self.noise_table = noise_table
         if population_size < 2 or (antithetic and population_size % 2):
             raise ValueError(
                 f"population_size={population_size}: it must be at least 2, and even with antithetic sampling."
@@ -102,12 +107,25 @@ class OpenESStrategy(Strategy):
         self._noise: np.ndarray | None = None
         self._candidates: np.ndarray | None = None
 
-    def ask(self) -> np.ndarray:
+    def ask(self) -> np.ndarray | NoiseTablePopulation:
         half = self.population_size // 2 if self.antithetic else self.population_size
-        eps = self.rng.standard_normal((half, self.num_params))
+        if self.noise_table is None:
+            eps = self.rng.standard_normal((half, self.num_params))
+            self._noise = np.concatenate([eps, -eps]) if self.antithetic else eps
+            self._candidates = self.center + self.sigma * self._noise
+            return self._candidates
+        offsets = self.noise_table.sample_offsets(self.rng, self.num_params, half)
+        eps = np.stack([self.noise_table.get(o, self.num_params) for o in offsets]).astype(np.float64)
+        signs = np.repeat([1.0, -1.0], half) if self.antithetic else np.ones(half)
         self._noise = np.concatenate([eps, -eps]) if self.antithetic else eps
-        self._candidates = self.center + self.sigma * self._noise
-        return self._candidates
+        population = NoiseTablePopulation(
+            self.noise_table,
+            self.center.copy(),
+            np.tile(offsets, 2) if self.antithetic else offsets,
+            self.sigma * signs,
+        )
+        self._candidates = population.dense()
+        return population
 
     def tell(self, fitness: np.ndarray) -> dict[str, float]:
         if self._noise is None or self._candidates is None:
