@@ -64,7 +64,7 @@ from stable_baselines3.common.env_util import make_vec_env  # noqa: E402
 from stable_baselines3.common.vec_env import VecEnv, VecNormalize  # noqa: E402
 
 from sb3_es.cli import ALGOS as SB3_ES_ALGOS  # noqa: E402
-from sb3_es.common.population_algorithm import guess_foreign_algorithm  # noqa: E402
+from sb3_es.common.save_util import guess_foreign_algorithm  # noqa: E402
 
 
 def register_envs() -> None:

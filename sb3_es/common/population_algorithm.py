@@ -3,12 +3,9 @@
 from __future__ import annotations
 
 import io
-import json
 import pathlib
-import pickle
 import sys
 import time
-import zipfile
 from abc import abstractmethod
 from typing import Any, ClassVar, TypeVar
 
@@ -17,11 +14,11 @@ import torch as th
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.policies import BasePolicy
-from stable_baselines3.common.save_util import load_from_zip_file
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
 from stable_baselines3.common.utils import safe_mean
 
 from sb3_es.common.policies import FlatPolicy, LinearPolicy, MlpPolicy
+from sb3_es.common.save_util import check_save_file
 from sb3_es.evaluation import PopulationEvaluator, PopulationResult, VecEnvEvaluator
 from sb3_es.strategies import Strategy
 from sb3_es.strategies.noise import NoiseTablePopulation, SharedNoiseTable
@@ -41,30 +38,6 @@ def check_positive(name: str, value: float | Schedule) -> None:
         raise ValueError(f"{name}={start}: it must be a positive number (got {value!r}).")
 
 
-#: Attributes that identify the algorithm of a save made by Stable-Baselines3 or sb3-contrib.
-_FOREIGN_MARKERS = (
-    ("clip_range", "PPO"),
-    ("exploration_schedule", "DQN"),
-    ("target_policy_noise", "TD3"),
-    ("target_entropy", "SAC"),
-    ("n_delta", "sb3-contrib's ARS"),
-    ("gae_lambda", "A2C"),
-)
-
-
-def guess_foreign_algorithm(data: dict[str, Any]) -> str:
-    """
-    Name the algorithm that most likely wrote a save that sb3-es did not write.
-
-    :param data: The save's data dictionary.
-    :return: A description such as ``"PPO"`` or ``"another library or algorithm"``.
-    """
-    for key, name in _FOREIGN_MARKERS:
-        if key in data:
-            return name
-    return "another library or algorithm"
-
-
 def make_noise_table(size: int | None, seed: np.random.SeedSequence) -> SharedNoiseTable | None:
     """
     Build the shared noise table of a strategy, if one was asked for.
@@ -76,54 +49,6 @@ def make_noise_table(size: int | None, seed: np.random.SeedSequence) -> SharedNo
     if size is None:
         return None
     return SharedNoiseTable(size, seed=int(seed.generate_state(1)[0]))
-
-
-def check_save_file(path: str | pathlib.Path | io.BufferedIOBase, algorithm: str) -> None:
-    """
-    Check that ``path`` is a readable sb3-es save of ``algorithm`` before SB3 loads it.
-
-    :param path: File or file-like object given to ``load()``.
-    :param algorithm: Name of the class that loads it.
-    """
-    try:
-        data, params, _ = load_from_zip_file(path, device="cpu")
-    except (
-        zipfile.BadZipFile,
-        ValueError,
-        KeyError,
-        EOFError,
-        json.JSONDecodeError,
-        RuntimeError,
-        OSError,
-        pickle.UnpicklingError,
-        ImportError,
-        AttributeError,
-    ) as e:
-        if isinstance(e, FileNotFoundError):
-            raise
-        raise ValueError(
-            f"Cannot load {path!r}: it is corrupt or not a Stable-Baselines3 save file ({type(e).__name__}: {e}). "
-            "Re-save the model, or load the right file."
-        ) from e
-    finally:
-        if isinstance(path, io.BufferedIOBase):
-            path.seek(0)
-    if data is None or params is None or "policy" not in params:
-        raise ValueError(f"Cannot load {path!r}: the archive has no model data or no policy parameters.")
-    saved_by = data.get("_algorithm_name")
-    if saved_by != algorithm:
-        origin = (
-            f"by sb3-es {saved_by}"
-            if saved_by
-            else f"by {guess_foreign_algorithm(data)} (policy class {data.get('policy_class')!r})"
-        )
-        hint = f" Load it with {saved_by}.load()." if saved_by else ""
-        raise ValueError(f"Cannot load {path!r} with {algorithm}.load(): it was saved {origin}.{hint}")
-    if not isinstance(data.get("strategy"), Strategy):
-        raise ValueError(
-            f"Cannot load {path!r}: the saved strategy state could not be read (the file is damaged or was "
-            "written by an incompatible version), so training could not continue where it stopped."
-        )
 
 
 class PopulationAlgorithm(BaseAlgorithm):
@@ -294,7 +219,12 @@ class PopulationAlgorithm(BaseAlgorithm):
         :param kwargs: Attributes to override.
         :return: The loaded model.
         """
-        check_save_file(path, cls.__name__)
+        data = check_save_file(path, cls.__name__)
+        if not isinstance(data.get("strategy"), Strategy):
+            raise ValueError(
+                f"Cannot load {path!r}: the saved strategy state could not be read (the file is damaged or was "
+                "written by an incompatible version), so training could not continue where it stopped."
+            )
         return super().load(path, env, device, custom_objects, print_system_info, force_reset, **kwargs)
 
     # ------------------------------------------------------------------ training

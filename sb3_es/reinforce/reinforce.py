@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import io
+import pathlib
 import sys
 import time
 import warnings
@@ -19,6 +21,7 @@ from stable_baselines3.common.vec_env import VecEnv
 from torch.nn import functional as F
 
 from sb3_es.common.population_algorithm import check_positive
+from sb3_es.common.save_util import check_save_file
 from sb3_es.reinforce.policies import DiscretizedPolicy, MlpPolicy, MultiInputPolicy, check_action_space
 
 SelfREINFORCE = TypeVar("SelfREINFORCE", bound="REINFORCE")
@@ -148,6 +151,7 @@ class REINFORCE(BaseAlgorithm):
         )
         if self.env is not None:
             check_action_space(self.action_space)
+        self._algorithm_name = type(self).__name__
         self.n_episodes = int(n_episodes)
         self.gamma = float(gamma)
         self.normalize_returns = normalize_returns
@@ -180,6 +184,32 @@ class REINFORCE(BaseAlgorithm):
         return ["policy", "policy.optimizer"], []
 
     # ------------------------------------------------------------------ training
+    @classmethod
+    def load(  # type: ignore[override]
+        cls: type[SelfREINFORCE],
+        path: str | pathlib.Path | io.BufferedIOBase,
+        env: GymEnv | None = None,
+        device: th.device | str = "auto",
+        custom_objects: dict[str, Any] | None = None,
+        print_system_info: bool = False,
+        force_reset: bool = True,
+        **kwargs: Any,
+    ) -> SelfREINFORCE:
+        """
+        Load a model saved by ``save()``; raises ``ValueError`` for a corrupt file or another algorithm's save.
+
+        :param path: Path or file-like object of the zip archive.
+        :param env: Environment to continue training on (optional for ``predict()``).
+        :param device: Torch device.
+        :param custom_objects: Objects replacing saved ones, as in SB3.
+        :param print_system_info: Print the system info of the save and of this machine.
+        :param force_reset: Reset the env before training.
+        :param kwargs: Attributes to override.
+        :return: The loaded model.
+        """
+        check_save_file(path, cls.__name__)
+        return super().load(path, env, device, custom_objects, print_system_info, force_reset, **kwargs)
+
     def learn(
         self: SelfREINFORCE,
         total_timesteps: int,
@@ -310,7 +340,7 @@ class REINFORCE(BaseAlgorithm):
             episode_returns=np.array(kept_returns),
         )
 
-    def train(self, batch: EpisodeBatch) -> None:  # type: ignore[override]
+    def train(self, batch: EpisodeBatch) -> None:
         """
         One policy-gradient step (and value regression with a baseline) on a batch of episodes.
 

@@ -1,0 +1,334 @@
+"""Behaviour of REINFORCE with discretized actions: learning, discretization, SB3 glue, save/load, errors."""
+
+from __future__ import annotations
+
+import itertools
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch as th
+from gymnasium import spaces
+from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.evaluation import evaluate_policy
+from stable_baselines3.common.logger import KVWriter, Logger
+from stable_baselines3.common.monitor import Monitor
+from stable_baselines3.common.vec_env import DummyVecEnv
+
+from sb3_es.reinforce import REINFORCE, DiscretizedPolicy, MlpPolicy
+
+
+@pytest.fixture(autouse=True)
+def one_torch_thread() -> Any:
+    """Small MLPs run fastest, and with reproducible timings, on one thread (2-core CI machines)."""
+    threads = th.get_num_threads()
+    th.set_num_threads(1)
+    yield
+    th.set_num_threads(threads)
+
+
+class StepCounter(gym.Wrapper):
+    """Counts the calls to ``step()`` of every wrapped env in one shared list."""
+
+    def __init__(self, env: gym.Env, counter: list[int]) -> None:
+        super().__init__(env)
+        self.counter = counter
+
+    def step(self, action: Any) -> Any:
+        self.counter[0] += 1
+        return self.env.step(action)
+
+
+class BoxActionEnv(gym.Env):
+    """Tiny env with a 4-dim Box action space; records the actions it receives."""
+
+    def __init__(self, low: np.ndarray | float = -1.0, high: np.ndarray | float = 1.0, episode_length: int = 5) -> None:
+        self.observation_space = spaces.Box(-1.0, 1.0, shape=(3,), dtype=np.float32)
+        self.action_space = spaces.Box(low, high, shape=(4,), dtype=np.float32)
+        self.episode_length = episode_length
+        self.actions: list[np.ndarray] = []
+        self._t = 0
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[np.ndarray, dict]:
+        super().reset(seed=seed)
+        self._t = 0
+        return self.observation_space.sample(), {}
+
+    def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict]:
+        self.actions.append(np.array(action, copy=True))
+        self._t += 1
+        obs = self.np_random.uniform(-1, 1, size=3).astype(np.float32)
+        return obs, float(-np.sum(np.square(action))), self._t >= self.episode_length, False, {}
+
+
+class StopAt(BaseCallback):
+    """Returns False at the ``stop_at``-th call of ``on_step``; counts rollouts."""
+
+    def __init__(self, stop_at: int | None = None) -> None:
+        super().__init__()
+        self.stop_at = stop_at
+        self.rollout_starts = 0
+        self.rollout_ends = 0
+
+    def _on_rollout_start(self) -> None:
+        self.rollout_starts += 1
+
+    def _on_rollout_end(self) -> None:
+        self.rollout_ends += 1
+
+    def _on_step(self) -> bool:
+        return self.stop_at is None or self.n_calls < self.stop_at
+
+
+class RecordWriter(KVWriter):
+    """Keeps every dumped key/value dict."""
+
+    def __init__(self) -> None:
+        self.records: list[dict[str, Any]] = []
+
+    def write(self, key_values: dict[str, Any], key_excluded: dict[str, Any], step: int = 0) -> None:
+        self.records.append(dict(key_values))
+
+
+def counted_cartpole(n_envs: int, counter: list[int]) -> DummyVecEnv:
+    return DummyVecEnv([lambda: Monitor(StepCounter(gym.make("CartPole-v1"), counter)) for _ in range(n_envs)])
+
+
+def params_of(model: REINFORCE) -> list[th.Tensor]:
+    return [p.detach().clone() for p in model.policy.parameters()]
+
+
+def test_cartpole_learns() -> None:
+    """Budget: 60k env steps, 4 env slots, 8 episodes per update (about 8 s on a 2-core CPU, one torch thread)."""
+    env = make_vec_env("CartPole-v1", n_envs=4, seed=0)
+    model = REINFORCE("MlpPolicy", env, learning_rate=1e-2, n_episodes=8, gamma=0.99, seed=0, device="cpu")
+    model.learn(60_000)
+    eval_env = make_vec_env("CartPole-v1", n_envs=1, seed=100)
+    mean_return, _ = evaluate_policy(model, eval_env, n_eval_episodes=10, deterministic=True)
+    assert mean_return >= 475
+
+
+def test_joint_discretization_matches_product_grid() -> None:
+    model = REINFORCE("MlpPolicy", BoxActionEnv(), policy_kwargs=dict(n_bins=3, joint=True), seed=0)
+    policy = model.policy
+    assert policy.n_actions == 81
+    assert policy.action_net.out_features == 81
+    actions = policy.indices_to_actions(th.arange(81)).numpy()
+    expected = np.array(list(itertools.product([-1.0, 0.0, 1.0], repeat=4)), dtype=np.float32)
+    np.testing.assert_array_equal(actions, expected)
+
+
+def test_factorized_discretization_and_actions_on_grid() -> None:
+    low = np.array([-2.0, 0.0, -1.0, 3.0], dtype=np.float32)
+    high = np.array([2.0, 1.0, 0.0, 5.0], dtype=np.float32)
+    env = BoxActionEnv(low, high)
+    model = REINFORCE("MlpPolicy", env, n_episodes=2, policy_kwargs=dict(n_bins=5, joint=False), seed=0)
+    policy = model.policy
+    assert policy.action_net.out_features == 5 * 4
+    levels = np.linspace(low, high, 5, axis=1)
+    np.testing.assert_allclose(policy.action_levels.numpy(), levels)
+
+    model.learn(50)
+    obs = np.random.default_rng(0).uniform(-1, 1, size=(200, 3)).astype(np.float32)
+    for deterministic in (True, False):
+        actions, _ = model.predict(obs, deterministic=deterministic)
+        assert actions.shape == (200, 4)
+        for d in range(4):
+            assert set(np.unique(actions[:, d])) <= set(levels[d].astype(np.float32))
+    # The actions the env received during training are on the grid too, and inside the Box.
+    received = np.array(env.actions)
+    assert all(env.action_space.contains(a) for a in received)
+    for d in range(4):
+        assert set(np.unique(received[:, d])) <= set(levels[d].astype(np.float32))
+    # Stochastic predictions use several levels of each dimension (near-uniform initial policy).
+    sampled, _ = model.predict(obs, deterministic=False)
+    assert all(len(np.unique(sampled[:, d])) >= 3 for d in range(4))
+
+
+def test_joint_predict_on_grid_single_observation() -> None:
+    env = BoxActionEnv()
+    model = REINFORCE("MlpPolicy", env, policy_kwargs=dict(joint=True), seed=1)
+    obs, _ = env.reset(seed=0)
+    action, _ = model.predict(obs, deterministic=True)
+    assert action.shape == (4,)
+    assert set(np.unique(action)) <= {-1.0, 0.0, 1.0}
+
+
+def test_native_discrete_actions() -> None:
+    model = REINFORCE("MlpPolicy", "CartPole-v1", n_episodes=2, seed=0)
+    assert model.policy.n_actions == 2
+    model.learn(100)
+    obs = np.zeros((10, 4), dtype=np.float32)
+    actions, _ = model.predict(obs, deterministic=False)
+    assert actions.shape == (10,)
+    assert set(np.unique(actions)) <= {0, 1}
+
+    policy = DiscretizedPolicy(spaces.Box(-1, 1, (2,)), spaces.Discrete(3, start=-1), lambda _: 1e-3)
+    actions, _ = policy.predict(np.zeros((50, 2), dtype=np.float32))
+    assert set(np.unique(actions)) <= {-1, 0, 1}
+
+
+def test_exact_timestep_counting_with_three_envs() -> None:
+    counter = [0]
+    callback = StopAt()
+    model = REINFORCE("MlpPolicy", counted_cartpole(3, counter), n_episodes=4, seed=0)
+    model.learn(1_000, callback=callback)
+    assert model.num_timesteps >= 1_000
+    assert model.num_timesteps == counter[0]
+    assert model.num_timesteps == 3 * callback.n_calls
+    assert callback.rollout_starts == callback.rollout_ends == model._n_updates
+
+
+def test_callback_returning_false_stops_within_one_vec_step() -> None:
+    counter = [0]
+    callback = StopAt(stop_at=7)
+    model = REINFORCE("MlpPolicy", counted_cartpole(3, counter), n_episodes=30, seed=0)
+    before = params_of(model)
+    model.learn(10_000, callback=callback)
+    assert callback.n_calls == 7
+    assert model.num_timesteps == counter[0] == 21
+    # The interrupted update is discarded: no optimizer step was taken.
+    assert model._n_updates == 0
+    assert all(th.equal(a, b) for a, b in zip(before, params_of(model)))
+
+
+def test_logged_keys_and_progress_bar() -> None:
+    writer = RecordWriter()
+    model = REINFORCE("MlpPolicy", "CartPole-v1", n_episodes=2, use_baseline=True, max_grad_norm=1.0, seed=0)
+    model.set_logger(Logger(folder=None, output_formats=[writer]))
+    model.learn(300, progress_bar=True)
+    assert writer.records
+    keys = set(writer.records[-1])
+    for key in (
+        "rollout/ep_rew_mean",
+        "rollout/ep_len_mean",
+        "time/fps",
+        "time/total_timesteps",
+        "time/iterations",
+        "train/policy_loss",
+        "train/entropy",
+        "train/learning_rate",
+        "train/value_loss",
+    ):
+        assert key in keys, key
+
+
+def test_save_load_round_trip(tmp_path: Path) -> None:
+    kwargs = dict(n_bins=3, joint=True, net_arch=[32])
+    model = REINFORCE("MlpPolicy", BoxActionEnv(), n_episodes=2, use_baseline=True, policy_kwargs=kwargs, seed=0)
+    model.learn(40)
+    path = tmp_path / "reinforce.zip"
+    model.save(path)
+    loaded = REINFORCE.load(path)
+    assert loaded.policy.joint and loaded.policy.use_baseline and loaded.policy.n_actions == 81
+    obs = np.random.default_rng(0).uniform(-1, 1, size=(64, 3)).astype(np.float32)
+    np.testing.assert_array_equal(model.predict(obs, deterministic=True)[0], loaded.predict(obs, deterministic=True)[0])
+    th.manual_seed(7)
+    stochastic = model.predict(obs, deterministic=False)[0]
+    th.manual_seed(7)
+    np.testing.assert_array_equal(stochastic, loaded.predict(obs, deterministic=False)[0])
+    for a, b in zip(model.policy.state_dict().values(), loaded.policy.state_dict().values()):
+        assert th.equal(a, b)
+
+
+@pytest.mark.parametrize("use_baseline", [False, True])
+def test_resume_gives_identical_parameters(tmp_path: Path, use_baseline: bool) -> None:
+    kwargs: dict[str, Any] = dict(n_episodes=4, use_baseline=use_baseline, max_grad_norm=0.5, ent_coef=0.01, seed=3)
+    total = 3_000
+
+    straight = REINFORCE("MlpPolicy", counted_cartpole(3, [0]), **kwargs)
+    straight.learn(total)
+
+    first = REINFORCE("MlpPolicy", counted_cartpole(3, [0]), **kwargs)
+    first.learn(1_000)
+    first.save(tmp_path / "half.zip")
+    th.manual_seed(12345)  # global RNG state must not matter
+    np.random.seed(12345)
+    resumed = REINFORCE.load(tmp_path / "half.zip", env=counted_cartpole(3, [0]))
+    # Same end point as learn(total): updates end at episode boundaries, so ask for what is left.
+    resumed.learn(total - resumed.num_timesteps, reset_num_timesteps=False)
+
+    assert resumed.num_timesteps == straight.num_timesteps
+    assert resumed._n_updates == straight._n_updates
+    for a, b in zip(straight.policy.state_dict().values(), resumed.policy.state_dict().values()):
+        assert th.equal(a, b)
+    opt_a, opt_b = straight.policy.optimizer.state_dict(), resumed.policy.optimizer.state_dict()
+    for key in opt_a["state"]:
+        assert th.equal(opt_a["state"][key]["exp_avg"], opt_b["state"][key]["exp_avg"])
+
+
+def test_dict_observation_from_dm_control() -> None:
+    shimmy = pytest.importorskip("shimmy")
+    assert shimmy is not None
+    env = gym.make("dm_control/walker-walk-v0", max_episode_steps=50)
+    assert isinstance(env.observation_space, spaces.Dict)
+    model = REINFORCE("MultiInputPolicy", env, n_episodes=2, use_baseline=True, seed=0)
+    model.learn(200)
+    assert model.num_timesteps == 200
+    obs, _ = env.reset(seed=0)
+    action, _ = model.predict(obs, deterministic=True)
+    assert action.shape == (6,)
+    assert set(np.unique(action)) <= {-1.0, 0.0, 1.0}
+    # The alias "MlpPolicy" works with Dict observations too (they are flattened).
+    assert REINFORCE("MlpPolicy", env, policy_kwargs=dict(joint=True)).policy.n_actions == 3**6
+    env.close()
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        (dict(policy_kwargs=dict(n_bins=1)), "n_bins=1"),
+        (dict(n_episodes=0), "n_episodes=0"),
+        (dict(n_episodes=-3), "n_episodes=-3"),
+        (dict(learning_rate=0.0), "learning_rate=0.0"),
+        (dict(learning_rate=-1e-3), "learning_rate=-0.001"),
+        (dict(learning_rate=lambda _: -1.0), "learning_rate=-1.0"),
+        (dict(gamma=1.5), r"gamma=1.5.*\[0, 1\]"),
+        (dict(gamma=-0.1), r"gamma=-0.1.*\[0, 1\]"),
+        (dict(max_grad_norm=0.0), "max_grad_norm=0.0"),
+        (dict(policy_kwargs=dict(use_baseline=True)), "use_baseline"),
+    ],
+)
+def test_invalid_hyperparameters(kwargs: dict[str, Any], match: str) -> None:
+    with pytest.raises(ValueError, match=match):
+        REINFORCE("MlpPolicy", BoxActionEnv(), **kwargs)
+
+
+class _MultiDiscreteEnv(BoxActionEnv):
+    def __init__(self, action_space: spaces.Space) -> None:
+        super().__init__()
+        self.action_space = action_space  # type: ignore[assignment]
+
+
+@pytest.mark.parametrize("action_space", [spaces.MultiDiscrete([3, 3]), spaces.MultiBinary(4)])
+def test_unsupported_action_spaces(action_space: spaces.Space) -> None:
+    with pytest.raises(ValueError, match="Unsupported action space"):
+        REINFORCE("MlpPolicy", _MultiDiscreteEnv(action_space))
+    with pytest.raises(ValueError, match="Unsupported action space"):
+        MlpPolicy(spaces.Box(-1, 1, (3,)), action_space, lambda _: 1e-3)
+
+
+def test_joint_action_space_too_large_suggests_factorized() -> None:
+    box17 = spaces.Box(-1, 1, (17,), dtype=np.float32)
+    with pytest.raises(ValueError, match=r"3\*\*17 = 129140163 actions.*factorized"):
+        DiscretizedPolicy(spaces.Box(-1, 1, (3,)), box17, lambda _: 1e-3, joint=True)
+    factorized = DiscretizedPolicy(spaces.Box(-1, 1, (3,)), box17, lambda _: 1e-3, joint=False)
+    assert factorized.action_net.out_features == 3 * 17
+
+
+def test_load_rejects_corrupt_and_foreign_files(tmp_path: Path) -> None:
+    from sb3_es import ARS
+
+    corrupt = tmp_path / "corrupt.zip"
+    corrupt.write_bytes(b"not a zip archive at all")
+    with pytest.raises(ValueError, match="corrupt"):
+        REINFORCE.load(corrupt)
+    ARS("LinearPolicy", "CartPole-v1", seed=0).save(tmp_path / "ars.zip")
+    with pytest.raises(ValueError, match=r"saved by sb3-es ARS"):
+        REINFORCE.load(tmp_path / "ars.zip")
+    REINFORCE("MlpPolicy", "CartPole-v1", seed=0).save(tmp_path / "reinforce.zip")
+    with pytest.raises(ValueError, match=r"saved by sb3-es REINFORCE"):
+        ARS.load(tmp_path / "reinforce.zip")
