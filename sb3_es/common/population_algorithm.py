@@ -11,14 +11,13 @@ from typing import Any, ClassVar, TypeVar
 
 import numpy as np
 import torch as th
-from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
 from stable_baselines3.common.utils import safe_mean
 
+from sb3_es.common.base_class import ESBaseAlgorithm
 from sb3_es.common.policies import FlatPolicy, LinearPolicy, MlpPolicy
-from sb3_es.common.save_util import check_save_file
 from sb3_es.evaluation import PopulationEvaluator, PopulationResult, VecEnvEvaluator
 from sb3_es.strategies import Strategy
 from sb3_es.strategies.noise import NoiseTablePopulation, SharedNoiseTable
@@ -51,7 +50,7 @@ def make_noise_table(size: int | None, seed: np.random.SeedSequence) -> SharedNo
     return SharedNoiseTable(size, seed=int(seed.generate_state(1)[0]))
 
 
-class PopulationAlgorithm(BaseAlgorithm):
+class PopulationAlgorithm(ESBaseAlgorithm):
     """
     Base class of the population methods (ARS, OpenES, CMA-ES): an algorithm is mostly its strategy.
 
@@ -109,20 +108,8 @@ class PopulationAlgorithm(BaseAlgorithm):
     ) -> None:
         # Env id, for evaluator="ray" (each Ray actor builds its envs from it); not saved.
         self._env_id = env if isinstance(env, str) else None
-        if isinstance(policy, str):
-            # Resolve aliases here: SB3 rejects the alias "MlpPolicy" for Dict observations, which we flatten.
-            policy = self._get_policy_from_name(policy)  # type: ignore[assignment]
         super().__init__(
-            policy,
-            env,
-            learning_rate=learning_rate,
-            policy_kwargs=policy_kwargs,
-            stats_window_size=stats_window_size,
-            tensorboard_log=tensorboard_log,
-            verbose=verbose,
-            device=device,
-            support_multi_env=True,
-            seed=seed,
+            policy, env, learning_rate, policy_kwargs, stats_window_size, tensorboard_log, verbose, device, seed
         )
         if int(n_eval_episodes) != n_eval_episodes or n_eval_episodes < 1:
             raise ValueError(f"n_eval_episodes={n_eval_episodes}: it must be a positive integer.")
@@ -130,7 +117,6 @@ class PopulationAlgorithm(BaseAlgorithm):
         self.n_eval_episodes = int(n_eval_episodes)
         self.alive_bonus_offset = float(alive_bonus_offset)
         self.zero_policy = zero_policy
-        self._algorithm_name = type(self).__name__
         self.strategy: Strategy | None = None
         self._env_rng: np.random.Generator | None = None
         if not (isinstance(evaluator, PopulationEvaluator) or evaluator in ("local", "ray")):
@@ -195,37 +181,12 @@ class PopulationAlgorithm(BaseAlgorithm):
             self.strategy.set_center(vector)
 
     @classmethod
-    def load(  # type: ignore[override]
-        cls: type[SelfPopulationAlgorithm],
-        path: str | pathlib.Path | io.BufferedIOBase,
-        env: GymEnv | None = None,
-        device: th.device | str = "auto",
-        custom_objects: dict[str, Any] | None = None,
-        print_system_info: bool = False,
-        force_reset: bool = True,
-        **kwargs: Any,
-    ) -> SelfPopulationAlgorithm:
-        """
-        Load a model saved by ``save()``, with its strategy state, so that ``learn()`` continues the run.
-
-        Raises ``ValueError`` for a corrupt file or one saved by another algorithm.
-
-        :param path: Path or file-like object of the zip archive.
-        :param env: Environment to continue training on (optional for ``predict()``).
-        :param device: Torch device.
-        :param custom_objects: Objects replacing saved ones, as in SB3.
-        :param print_system_info: Print the system info of the save and of this machine.
-        :param force_reset: Reset the env before training.
-        :param kwargs: Attributes to override.
-        :return: The loaded model.
-        """
-        data = check_save_file(path, cls.__name__)
+    def _check_save_data(cls, path: str | pathlib.Path | io.BufferedIOBase, data: dict[str, Any]) -> None:
         if not isinstance(data.get("strategy"), Strategy):
             raise ValueError(
                 f"Cannot load {path!r}: the saved strategy state could not be read (the file is damaged or was "
                 "written by an incompatible version), so training could not continue where it stopped."
             )
-        return super().load(path, env, device, custom_objects, print_system_info, force_reset, **kwargs)
 
     # ------------------------------------------------------------------ training
     def _get_evaluator(self) -> PopulationEvaluator:

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import io
-import pathlib
 import sys
 import time
 import warnings
@@ -12,7 +10,6 @@ from typing import Any, ClassVar, TypeVar
 
 import numpy as np
 import torch as th
-from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
@@ -20,8 +17,8 @@ from stable_baselines3.common.utils import obs_as_tensor, safe_mean
 from stable_baselines3.common.vec_env import VecEnv
 from torch.nn import functional as F
 
+from sb3_es.common.base_class import ESBaseAlgorithm
 from sb3_es.common.population_algorithm import check_positive
-from sb3_es.common.save_util import check_save_file
 from sb3_es.reinforce.policies import DiscretizedPolicy, MlpPolicy, MultiInputPolicy, check_action_space
 
 SelfREINFORCE = TypeVar("SelfREINFORCE", bound="REINFORCE")
@@ -47,7 +44,7 @@ class EpisodeBatch:
     episode_returns: np.ndarray
 
 
-class REINFORCE(BaseAlgorithm):
+class REINFORCE(ESBaseAlgorithm):
     """
     REINFORCE, the Monte-Carlo policy gradient (Williams, 1992), with discretized actions.
 
@@ -134,24 +131,11 @@ class REINFORCE(BaseAlgorithm):
             raise ValueError("Pass use_baseline to REINFORCE, not in policy_kwargs.")
         if env is not None and not isinstance(env, str) and hasattr(env, "action_space"):
             check_action_space(env.action_space)
-        if isinstance(policy, str):
-            # Resolve aliases here: SB3 rejects "MlpPolicy" for Dict observations, which this policy flattens.
-            policy = self._get_policy_from_name(policy)  # type: ignore[assignment]
         super().__init__(
-            policy,
-            env,
-            learning_rate=learning_rate,
-            policy_kwargs=policy_kwargs,
-            stats_window_size=stats_window_size,
-            tensorboard_log=tensorboard_log,
-            verbose=verbose,
-            device=device,
-            support_multi_env=True,
-            seed=seed,
+            policy, env, learning_rate, policy_kwargs, stats_window_size, tensorboard_log, verbose, device, seed
         )
         if self.env is not None:
             check_action_space(self.action_space)
-        self._algorithm_name = type(self).__name__
         self.n_episodes = int(n_episodes)
         self.gamma = float(gamma)
         self.normalize_returns = normalize_returns
@@ -184,32 +168,6 @@ class REINFORCE(BaseAlgorithm):
         return ["policy", "policy.optimizer"], []
 
     # ------------------------------------------------------------------ training
-    @classmethod
-    def load(  # type: ignore[override]
-        cls: type[SelfREINFORCE],
-        path: str | pathlib.Path | io.BufferedIOBase,
-        env: GymEnv | None = None,
-        device: th.device | str = "auto",
-        custom_objects: dict[str, Any] | None = None,
-        print_system_info: bool = False,
-        force_reset: bool = True,
-        **kwargs: Any,
-    ) -> SelfREINFORCE:
-        """
-        Load a model saved by ``save()``; raises ``ValueError`` for a corrupt file or another algorithm's save.
-
-        :param path: Path or file-like object of the zip archive.
-        :param env: Environment to continue training on (optional for ``predict()``).
-        :param device: Torch device.
-        :param custom_objects: Objects replacing saved ones, as in SB3.
-        :param print_system_info: Print the system info of the save and of this machine.
-        :param force_reset: Reset the env before training.
-        :param kwargs: Attributes to override.
-        :return: The loaded model.
-        """
-        check_save_file(path, cls.__name__)
-        return super().load(path, env, device, custom_objects, print_system_info, force_reset, **kwargs)
-
     def learn(
         self: SelfREINFORCE,
         total_timesteps: int,
