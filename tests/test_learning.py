@@ -12,7 +12,7 @@ def test_ars_v2_linear_reaches_swimmer_threshold() -> None:
     """ARS paper settings on Swimmer-v5 (seed 959, one of the paper's seeds): the center policy reaches 325.
 
     Budget: 200k env steps (200 episodes of 1000 steps), evaluated every 20k steps on 5 episodes.
-    benchmarks/ars_swimmer.py runs the same check over more seeds and compares ARS-V1.
+    benchmarks/ars_paper.py runs the same check over more seeds and compares ARS-V1.
     """
     env = make_vec_env("Swimmer-v5", n_envs=2, seed=959)
     eval_env = make_vec_env("Swimmer-v5", n_envs=1, seed=123)

@@ -1,0 +1,116 @@
+"""ARS on MuJoCo tasks with the ARS paper's settings (its Table 9), against the paper's reward thresholds.
+
+Evaluates the center policy every ``--eval-every`` env steps (5 episodes, deterministic) and reports the
+first env-step count (and episode count) at which the evaluation reached the threshold. Run::
+
+    python benchmarks/ars_paper.py --env Swimmer-v5 --steps 300000 --seeds 237,759,959,0 --variants V1,V2
+    python benchmarks/ars_paper.py --env HalfCheetah-v5 --steps 5000000 --seeds 0 --variants V2 --eval-every 100000
+    python benchmarks/ars_paper.py --env Hopper-v5 --steps 5000000 --seeds 0 --variants V2 --eval-every 100000
+
+V1 trains without observation normalization, V2 with it (inside the policy). ``--max-seconds`` stops a run
+after that much wall-clock time.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import sys
+import time
+from typing import Any
+
+from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.evaluation import evaluate_policy
+
+from sb3_es import ARS
+
+#: Paper settings (Table 9, the V1/V2 rows for Swimmer, the V2-t rows for Hopper and HalfCheetah) and thresholds.
+PRESETS: dict[str, dict[str, Any]] = {
+    "Swimmer-v5": dict(threshold=325.0, n_delta=1, n_top=1, delta_std=0.01, learning_rate=0.02, alive=0.0),
+    "Hopper-v5": dict(threshold=3120.0, n_delta=8, n_top=4, delta_std=0.025, learning_rate=0.01, alive=-1.0),
+    "HalfCheetah-v5": dict(threshold=3430.0, n_delta=32, n_top=4, delta_std=0.03, learning_rate=0.02, alive=0.0),
+}
+
+
+def run(
+    env_id: str, variant: str, seed: int, steps: int, eval_every: int, n_envs: int, max_seconds: float
+) -> dict[str, Any]:
+    """
+    Train one ARS run and evaluate it periodically.
+
+    :param env_id: A key of :data:`PRESETS`.
+    :param variant: ``"V1"`` or ``"V2"``.
+    :param seed: Random seed.
+    :param steps: Env-step budget.
+    :param eval_every: Env steps between evaluations.
+    :param n_envs: Env slots.
+    :param max_seconds: Wall-clock limit of the run.
+    :return: Summary of the run.
+    """
+    preset = PRESETS[env_id]
+    env = make_vec_env(env_id, n_envs=n_envs, seed=seed)
+    eval_env = make_vec_env(env_id, n_envs=1, seed=123)
+    model = ARS(
+        "LinearPolicy",
+        env,
+        n_delta=preset["n_delta"],
+        n_top=preset["n_top"],
+        delta_std=preset["delta_std"],
+        learning_rate=preset["learning_rate"],
+        alive_bonus_offset=preset["alive"],
+        seed=seed,
+        policy_kwargs=dict(normalize_observations=variant == "V2"),
+    )
+    start = time.perf_counter()
+    history: list[tuple[int, int, float]] = []
+    episodes = 0
+    while model.num_timesteps < steps and time.perf_counter() - start < max_seconds:
+        model.learn(eval_every, reset_num_timesteps=False)
+        episodes = model._n_updates * 2 * preset["n_delta"]  # one episode per candidate
+        mean, _ = evaluate_policy(model, eval_env, n_eval_episodes=5)
+        history.append((model.num_timesteps, episodes, float(mean)))  # type: ignore[arg-type]
+        print(
+            f"  {env_id} {variant} seed={seed}: {model.num_timesteps} steps, {episodes} episodes, eval {mean:.0f}",
+            file=sys.stderr,
+            flush=True,
+        )
+    first = next(((n, e) for n, e, r in history if r >= preset["threshold"]), None)
+    return {
+        "first": first,
+        "best": max(r for _, _, r in history),
+        "final": history[-1][2],
+        "steps": model.num_timesteps,
+        "episodes": episodes,
+        "seconds": time.perf_counter() - start,
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--env", choices=sorted(PRESETS), default="Swimmer-v5")
+    parser.add_argument("--steps", type=int, default=300_000)
+    parser.add_argument("--max-seconds", type=float, default=float("inf"))
+    parser.add_argument("--eval-every", type=int, default=20_000)
+    parser.add_argument("--seeds", default="237,759,959,0")
+    parser.add_argument("--n-envs", type=int, default=2)
+    parser.add_argument("--variants", default="V1,V2")
+    args = parser.parse_args()
+    print(f"hardware: {os.cpu_count()} CPUs, {platform.processor() or platform.machine()}")
+    threshold = PRESETS[args.env]["threshold"]
+    print(f"command: python {' '.join(sys.argv)}")
+    print(f"| env | variant | seed | env steps (episodes) to {threshold:g} | best eval | final eval | steps | s |")
+    print("|---|---|---|---|---|---|---|---|")
+    for variant in args.variants.split(","):
+        for seed in (int(s) for s in args.seeds.split(",")):
+            row = run(args.env, variant, seed, args.steps, args.eval_every, args.n_envs, args.max_seconds)
+            first = "not reached" if row["first"] is None else f"{row['first'][0]} ({row['first'][1]})"
+            print(
+                f"| {args.env} | {variant} | {seed} | {first} | {row['best']:.0f} | {row['final']:.0f} | "
+                f"{row['steps']} | {row['seconds']:.0f} |",
+                flush=True,
+            )
+
+
+if __name__ == "__main__":
+    main()
