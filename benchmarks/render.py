@@ -65,19 +65,7 @@ from stable_baselines3.common.vec_env import VecEnv, VecNormalize  # noqa: E402
 
 from sb3_es.cli import ALGOS as SB3_ES_ALGOS  # noqa: E402
 from sb3_es.common.save_util import guess_foreign_algorithm  # noqa: E402
-
-
-def register_envs() -> None:
-    """Register shimmy's ``dm_control/...`` envs when shimmy is installed."""
-    import warnings
-
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        try:
-            import shimmy
-        except ImportError:
-            return
-    gym.register_envs(shimmy)
+from sb3_es.zoo import register_envs  # noqa: E402
 
 
 def algorithm_classes() -> dict[str, type[BaseAlgorithm]]:

@@ -10,6 +10,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import torch as th
+from envs import StepCounter
 from gymnasium import spaces
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.env_util import make_vec_env
@@ -28,18 +29,6 @@ def one_torch_thread() -> Any:
     th.set_num_threads(1)
     yield
     th.set_num_threads(threads)
-
-
-class StepCounter(gym.Wrapper):
-    """Counts the calls to ``step()`` of every wrapped env in one shared list."""
-
-    def __init__(self, env: gym.Env, counter: list[int]) -> None:
-        super().__init__(env)
-        self.counter = counter
-
-    def step(self, action: Any) -> Any:
-        self.counter[0] += 1
-        return self.env.step(action)
 
 
 class BoxActionEnv(gym.Env):

@@ -87,6 +87,18 @@ class PopulationResult:
     center_lengths: list[int] = field(default_factory=list)
     stopped: bool = False
 
+    @classmethod
+    def empty(cls, n_candidates: int, n_episodes: int, obs_dim: int) -> PopulationResult:
+        """
+        :param n_candidates: Candidates in the population.
+        :param n_episodes: Episodes per candidate.
+        :param obs_dim: Size of a flattened observation.
+        :return: A result with zero returns and lengths and no observations, to be filled in.
+        """
+        returns = np.zeros((n_candidates, n_episodes))
+        lengths = np.zeros((n_candidates, n_episodes), dtype=np.int64)
+        return cls(returns, lengths, ObsStats.zeros(obs_dim))
+
 
 class PopulationEvaluator(ABC):
     """Runs the candidates of a population in environments and reports their returns."""

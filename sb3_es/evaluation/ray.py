@@ -39,7 +39,7 @@ from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv
 
 from sb3_es.common.policies import FlatPolicy
-from sb3_es.evaluation.base import ObsStats, PopulationEvaluator, PopulationResult, StepHook
+from sb3_es.evaluation.base import PopulationEvaluator, PopulationResult, StepHook
 from sb3_es.evaluation.vec_env import VecEnvEvaluator
 from sb3_es.strategies.noise import NoiseTablePopulation, noise_rows
 
@@ -402,9 +402,8 @@ class RayEvaluator(PopulationEvaluator):
             self._kill_actors()
             raise
         n_candidates = population.shape[0]
-        returns = np.zeros((n_candidates, n_episodes))
-        lengths = np.zeros((n_candidates, n_episodes), dtype=np.int64)
-        result = PopulationResult(returns, lengths, ObsStats.zeros(policy.obs_dim))
+        result = PopulationResult.empty(n_candidates, n_episodes, policy.obs_dim)
+        returns, lengths = result.returns, result.lengths
         for share, output in zip(shares, outputs):
             part: PopulationResult = output["result"]
             candidates, episodes = share % n_candidates, share // n_candidates

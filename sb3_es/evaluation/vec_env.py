@@ -8,7 +8,7 @@ import numpy as np
 from stable_baselines3.common.vec_env import VecEnv
 
 from sb3_es.common.policies import FlatPolicy
-from sb3_es.evaluation.base import ObsStats, PopulationEvaluator, PopulationResult, StepHook
+from sb3_es.evaluation.base import PopulationEvaluator, PopulationResult, StepHook
 from sb3_es.strategies.noise import NoiseTablePopulation
 
 
@@ -40,9 +40,8 @@ class VecEnvEvaluator(PopulationEvaluator):
         env = self.env
         n_envs = env.num_envs
         n_candidates = population.shape[0]
-        returns = np.zeros((n_candidates, n_episodes))
-        lengths = np.zeros((n_candidates, n_episodes), dtype=np.int64)
-        result = PopulationResult(returns, lengths, ObsStats.zeros(policy.obs_dim))
+        result = PopulationResult.empty(n_candidates, n_episodes, policy.obs_dim)
+        returns, lengths = result.returns, result.lengths
 
         params = np.asarray(population, dtype=np.float32)
         center_params = np.asarray(center, dtype=np.float32)
