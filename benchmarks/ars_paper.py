@@ -6,11 +6,13 @@ first env-step count (and episode count) at which the evaluation reached the thr
     python benchmarks/ars_paper.py --env Swimmer-v5 --steps 300000 --seeds 237,759,959,0 --variants V1,V2
     python benchmarks/ars_paper.py --env HalfCheetah-v5 --steps 5000000 --seeds 0 --variants V2 --eval-every 100000
     python benchmarks/ars_paper.py --env Hopper-v5 --steps 5000000 --seeds 0 --variants V2 --eval-every 100000
-    python benchmarks/ars_paper.py --env dm_control/walker-walk-v0 --steps 10000000 --seeds 0 --variants V2 \
-        --eval-every 200000 --max-seconds 1200
+    python benchmarks/ars_paper.py --env dm_control/walker-walk-v0 --steps 100000000 --seeds 0 --variants V2 \
+        --eval-every 500000 --max-seconds 3600 --n-envs 4 [--policy mlp-ln]
 
-V1 trains without observation normalization, V2 with it (inside the policy). ``--max-seconds`` stops a run
-after that much wall-clock time.
+V1 trains without observation normalization, V2 with it (inside the policy). ``--policy linear`` (default) is
+the paper's linear policy; ``--policy mlp-ln`` an ``MlpPolicy`` with two hidden layers of 64 units and layer
+normalization (as the seed document's best walker-walk policy). ``--max-seconds`` stops a run after that much
+wall-clock time.
 """
 
 from __future__ import annotations
@@ -41,11 +43,24 @@ PRESETS: dict[str, dict[str, Any]] = {
 }
 
 
+#: ``--policy`` choices: policy class and its keyword arguments (observation normalization is set by the variant).
+POLICIES: dict[str, tuple[str, dict[str, Any]]] = {
+    "linear": ("LinearPolicy", {}),
+    "mlp-ln": ("MlpPolicy", dict(net_arch=[64, 64], layer_norm=True)),
+}
+
 gym.register_envs(shimmy)  # the dm_control/ ids
 
 
 def run(
-    env_id: str, variant: str, seed: int, steps: int, eval_every: int, n_envs: int, max_seconds: float
+    env_id: str,
+    variant: str,
+    seed: int,
+    steps: int,
+    eval_every: int,
+    n_envs: int,
+    max_seconds: float,
+    policy: str = "linear",
 ) -> dict[str, Any]:
     """
     Train one ARS run and evaluate it periodically.
@@ -57,13 +72,15 @@ def run(
     :param eval_every: Env steps between evaluations.
     :param n_envs: Env slots.
     :param max_seconds: Wall-clock limit of the run.
+    :param policy: A key of :data:`POLICIES`.
     :return: Summary of the run.
     """
     preset = PRESETS[env_id]
     env = make_vec_env(env_id, n_envs=n_envs, seed=seed)
     eval_env = make_vec_env(env_id, n_envs=1, seed=123)
+    policy_class, policy_kwargs = POLICIES[policy]
     model = ARS(
-        "LinearPolicy",
+        policy_class,
         env,
         n_delta=preset["n_delta"],
         n_top=preset["n_top"],
@@ -71,7 +88,7 @@ def run(
         learning_rate=preset["learning_rate"],
         alive_bonus_offset=preset["alive"],
         seed=seed,
-        policy_kwargs=dict(normalize_observations=variant == "V2"),
+        policy_kwargs=dict(policy_kwargs, normalize_observations=variant == "V2"),
     )
     start = time.perf_counter()
     history: list[tuple[int, int, float]] = []
@@ -106,15 +123,17 @@ def main() -> None:
     parser.add_argument("--seeds", default="237,759,959,0")
     parser.add_argument("--n-envs", type=int, default=2)
     parser.add_argument("--variants", default="V1,V2")
+    parser.add_argument("--policy", choices=sorted(POLICIES), default="linear")
     args = parser.parse_args()
     print(f"hardware: {os.cpu_count()} CPUs, {platform.processor() or platform.machine()}")
     threshold = PRESETS[args.env]["threshold"]
     print(f"command: python {' '.join(sys.argv)}")
+    print(f"policy: {args.policy} {POLICIES[args.policy]}")
     print(f"| env | variant | seed | env steps (episodes) to {threshold:g} | best eval | final eval | steps | s |")
     print("|---|---|---|---|---|---|---|---|")
     for variant in args.variants.split(","):
         for seed in (int(s) for s in args.seeds.split(",")):
-            row = run(args.env, variant, seed, args.steps, args.eval_every, args.n_envs, args.max_seconds)
+            row = run(args.env, variant, seed, args.steps, args.eval_every, args.n_envs, args.max_seconds, args.policy)
             first = "not reached" if row["first"] is None else f"{row['first'][0]} ({row['first'][1]})"
             print(
                 f"| {args.env} | {variant} | {seed} | {first} | {row['best']:.0f} | {row['final']:.0f} | "

@@ -24,11 +24,12 @@ The actors of idle configurations sleep (each reserves 0.01 CPU so that all of t
 Columns: env steps per second; milliseconds per generation; Ray's per-generation overhead, i.e. the
 ``evaluate()`` wall time minus the evaluation time of the slowest actor (inside ``VecEnvEvaluator``), which
 leaves serialization, transport, scheduling, merging and the callback replay (also shown alone); the
-imbalance (slowest actor minus the mean actor: time some actors sit idle at the end of a generation, because
-shares are fixed). "Same work": with the same seed, the local engine and Ray with 1 worker x 2 envs run
-bit-identical generations (checked), so the difference of their times, taken generation by generation, is
-everything Ray adds. The plain step loop (``env.step(action_space.sample())`` in 1 and 2 processes, no policy),
-measured before and after, is the machine's ceiling.
+imbalance (slowest share minus the mean share: shares are fixed, so an actor whose share is done waits for the
+slowest, running the center policy meanwhile, as idle slots of the local engine do). "Same work": with the
+same seed, the local engine and Ray with 1 worker x 2 envs run bit-identical generations (checked), so the
+difference of their times, taken generation by generation, is everything Ray adds. The plain step loop
+(``env.step(action_space.sample())`` in 1 and 2 processes, no policy), measured before and after, is the
+machine's ceiling.
 """
 
 from __future__ import annotations
@@ -101,7 +102,8 @@ class Row:
                 timings = self.evaluator.last_timings
                 slowest = max(timings["eval_times"])
                 self.overheads.append(timings["wall"] - slowest)
-                self.imbalances.append(slowest - float(np.mean(timings["eval_times"])))
+                shares = np.subtract(timings["eval_times"], timings["linger_times"])
+                self.imbalances.append(float(shares.max() - shares.mean()))
                 self.replays.append(timings["replay"])
 
 

@@ -156,6 +156,9 @@ def test_same_results_as_local_engine(toy_ray: RayEvaluator) -> None:
     assert result.n_steps == remote_steps(toy_ray) == sum(calls) == sum(toy_ray.last_timings["n_steps"])
     assert len(calls) == result.n_steps // ENVS_PER_WORKER
     assert len(toy_ray.last_timings["eval_times"]) == 2
+    # With two shares, each actor, once its share is done, runs the center policy until the driver has seen
+    # both shares done (those steps are in n_steps and in the replay above).
+    assert all(t > 0 for t in toy_ray.last_timings["linger_times"])
 
     # A single share runs on actor 0 with the generation's seed: bit for bit the local engine on 2 envs,
     # center-policy episodes and step count included.
@@ -167,6 +170,7 @@ def test_same_results_as_local_engine(toy_ray: RayEvaluator) -> None:
     np.testing.assert_array_equal(one.obs_stats.total, local_one.obs_stats.total)
     assert one.n_steps == local_one.n_steps
     assert one.center_returns == local_one.center_returns
+    assert toy_ray.last_timings["linger_times"] == [0.0]
 
 
 def test_noise_table_population(toy_ray: RayEvaluator) -> None:

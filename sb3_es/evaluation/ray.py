@@ -27,6 +27,7 @@ from __future__ import annotations
 import atexit
 import contextlib
 import logging
+import threading
 import time
 import weakref
 from collections.abc import Callable, Sequence
@@ -90,7 +91,28 @@ class _Worker:
         self.evaluator = VecEnvEvaluator(self.env)
         self.policy: FlatPolicy | None = None
         self.noise_tables: dict[tuple[int, int], np.ndarray] = {}
+        # Per generation token: set when the actor's share is done, and by the driver to end the lingering.
+        self._signals: dict[int, tuple[threading.Event, threading.Event]] = {}
+        self._signals_lock = threading.Lock()
         th.set_num_threads(1)
+
+    def _signal(self, token: int) -> tuple[threading.Event, threading.Event]:
+        """:return: The ``(share done, stop lingering)`` events of generation ``token``."""
+        with self._signals_lock:
+            return self._signals.setdefault(token, (threading.Event(), threading.Event()))
+
+    def jobs_done(self, token: int) -> bool:
+        """
+        Wait until this actor's share of generation ``token`` is done (or failed). Runs in the ``signal``
+        concurrency group, beside a running :meth:`evaluate`.
+        """
+        return self._signal(token)[0].wait()
+
+    def stop(self, token: int) -> None:
+        """End the lingering of generation ``token``: :meth:`evaluate` then returns. Runs in the ``signal`` group."""
+        self._signal(token)[1].set()
+        with self._signals_lock:
+            self._signals.pop(token, None)
 
     def ready(self) -> int:
         """:return: Number of env slots (used to wait for the actor and check it started)."""
@@ -117,12 +139,38 @@ class _Worker:
         """Keep a noise table (a zero-copy view into the object store)."""
         self.noise_tables[tuple(key)] = noise  # type: ignore[index]
 
-    def evaluate(self, payload: dict[str, Any], candidates: np.ndarray, seed: int) -> dict[str, Any]:
+    def evaluate(
+        self, payload: dict[str, Any], candidates: np.ndarray, seed: int, token: int | None = None
+    ) -> dict[str, Any]:
         """
         Evaluate one episode per entry of ``candidates`` (indices into the generation's population).
 
-        :return: The engine's result, the dones of every vec step, the done slots' infos and the timing.
+        :param token: The generation's token, if the actor should linger: once its share is done, it signals
+            :meth:`jobs_done` and keeps running the center policy in all slots until :meth:`stop` is called.
+        :return: The engine's result, the dones of every vec step, the done slots' infos and the timings (in the
+            engine, of which lingering).
         """
+        if token is None:
+            return {**self._evaluate(payload, candidates, seed, None), "linger_time": 0.0}
+        share_done, stop = self._signal(token)
+        linger_start: list[float] = []
+
+        def linger() -> bool:
+            if not linger_start:
+                linger_start.append(time.perf_counter())
+                share_done.set()
+            return not stop.is_set()
+
+        try:
+            output = self._evaluate(payload, candidates, seed, linger)
+        finally:
+            share_done.set()  # also on an error, so that the driver's wait ends
+        output["linger_time"] = time.perf_counter() - linger_start[0] if linger_start else 0.0
+        return output
+
+    def _evaluate(
+        self, payload: dict[str, Any], candidates: np.ndarray, seed: int, linger: Callable[[], bool] | None
+    ) -> dict[str, Any]:
         policy = self.policy
         if policy is None:
             raise RuntimeError("set_policy() must be called before evaluate().")
@@ -147,7 +195,7 @@ class _Worker:
             return True
 
         start = time.perf_counter()
-        result = self.evaluator.evaluate(policy, rows, center, 1, seed, record)
+        result = self.evaluator.evaluate(policy, rows, center, 1, seed, record, linger)
         eval_time = time.perf_counter() - start
         n_envs = self.env.num_envs
         dones = np.stack(dones_log) if dones_log else np.zeros((0, n_envs), dtype=bool)
@@ -164,7 +212,8 @@ _REMOTE_WORKER: Any = None
 def _remote_worker_class() -> Any:
     global _REMOTE_WORKER
     if _REMOTE_WORKER is None:
-        _REMOTE_WORKER = _import_ray().remote(_Worker)
+        # ``jobs_done`` and ``stop`` are sent to the ``signal`` group, so that they run beside ``evaluate``.
+        _REMOTE_WORKER = _import_ray().remote(concurrency_groups={"signal": 2})(_Worker)
     return _REMOTE_WORKER
 
 
@@ -182,6 +231,13 @@ class RayEvaluator(PopulationEvaluator):
     with one worker the results are those of the local engine on a VecEnv of ``envs_per_worker`` envs, bit for
     bit. (Box2D envs such as BipedalWalker keep their physics world across resets, so their episodes also depend,
     slightly, on what the env ran before, locally as remotely.)
+
+    Idle actors: as the local engine's idle slots do, an actor whose share is done keeps all its slots on the
+    center policy until every share is done (the driver then tells the actors to stop); the completed episodes
+    are reported as center episodes and the steps are counted. So no actor sits idle while another finishes,
+    but the number of these extra steps depends on timing: with several workers, ``num_timesteps`` and the
+    center returns are not reproducible to the step (the candidates' returns, the observation statistics and
+    so the learning are). With one share (one worker, or a single job) there is no lingering.
 
     Callbacks: remote steps cannot call the driver's callbacks, so when the results are back the step hook is
     replayed once per remote vec step (the actors' steps interleaved, with each actor's ``n_envs``, its real
@@ -263,12 +319,14 @@ class RayEvaluator(PopulationEvaluator):
         #: Number of actors replaced after they died, over the evaluator's life.
         self.restarted_actors = 0
         #: Timings of the last generation: ``wall`` (s, whole ``evaluate``), ``eval_times`` (s, each actor's time
-        #: inside the engine), ``replay`` (s, callback replay), ``n_steps`` (env steps of each actor).
+        #: inside the engine), ``linger_times`` (s, the part of it spent on the center policy after the actor's
+        #: share was done), ``replay`` (s, callback replay), ``n_steps`` (env steps of each actor).
         self.last_timings: dict[str, Any] = {}
         self._actors: list[Any] = []
         self._actor_policy: list[bytes | None] = []
         self._actor_tables: list[set[tuple[int, int]]] = []
         self._noise_refs: dict[tuple[int, int], Any] = {}
+        self._token = 0  # generation counter, names the lingering signals
         self._atexit_registered = False
 
     # ------------------------------------------------------------------ lifecycle
@@ -422,6 +480,7 @@ class RayEvaluator(PopulationEvaluator):
             "wall": end - start_time,
             "replay": end - replay_start,
             "eval_times": [output["eval_time"] for output in outputs],
+            "linger_times": [output["linger_time"] for output in outputs],
             "n_steps": [output["result"].n_steps for output in outputs],
         }
         return result
@@ -459,38 +518,56 @@ class RayEvaluator(PopulationEvaluator):
         else:
             payload["population"] = np.asarray(population, dtype=np.float32)
         payload_ref = ray.put(payload)
-
-        def submit(k: int) -> Any:
-            self._sync_actor(k, policy_spec, table)
-            candidates = shares[k] % n_candidates
-            return self._actors[k].evaluate.remote(payload_ref, candidates, int(seed) + k * self.envs_per_worker)
-
+        # With several shares, an actor whose share is done runs the center policy until all shares are done.
+        linger = len(shares) > 1
+        self._token += 1
+        token = self._token
         restarts = 0
-        pending: dict[Any, int] = {}
+        eval_refs: list[Any] = [None] * len(shares)
 
-        def submit_or_replace(k: int) -> None:
+        def replace(k: int, error: Exception) -> None:
             nonlocal restarts
+            restarts += 1
+            self._replace_actor(k, error, restarts)
+
+        def submit(k: int, lingering: bool) -> Any:
+            """Send share ``k`` to actor ``k`` (replacing it if it is dead); return the reference to wait for."""
             while True:
                 try:
-                    pending[submit(k)] = k
-                    return
+                    self._sync_actor(k, policy_spec, table)
+                    actor = self._actors[k]
+                    seed_k = int(seed) + k * self.envs_per_worker
+                    candidates = shares[k] % n_candidates
+                    eval_refs[k] = actor.evaluate.remote(payload_ref, candidates, seed_k, token if lingering else None)
+                    return actor.jobs_done.options(concurrency_group="signal").remote(token) if lingering else None
                 except RayActorError as e:  # died before its share was sent (e.g. while receiving the policy)
-                    restarts += 1
-                    self._replace_actor(k, e, restarts)
+                    replace(k, e)
 
+        if linger:
+            # Wait until every share is done; a dead actor's share is re-run (with lingering) by its replacement.
+            pending = {submit(k, True): k for k in range(len(shares))}
+            while pending:
+                ready, _ = ray.wait(list(pending), num_returns=1)
+                k = pending.pop(ready[0])
+                try:
+                    ray.get(ready[0])
+                except RayActorError as e:
+                    replace(k, e)
+                    pending[submit(k, True)] = k
+            for actor in self._actors[: len(shares)]:
+                actor.stop.options(concurrency_group="signal").remote(token)
+        else:
+            submit(0, False)
+        outputs: list[dict[str, Any]] = []
         for k in range(len(shares)):
-            submit_or_replace(k)
-        outputs: list[dict[str, Any] | None] = [None] * len(shares)
-        while pending:
-            ready, _ = ray.wait(list(pending), num_returns=1)
-            k = pending.pop(ready[0])
-            try:
-                outputs[k] = ray.get(ready[0])
-            except RayActorError as e:
-                restarts += 1
-                self._replace_actor(k, e, restarts)
-                submit_or_replace(k)
-        return [output for output in outputs if output is not None], shares
+            while True:
+                try:
+                    outputs.append(ray.get(eval_refs[k]))
+                    break
+                except RayActorError as e:  # died (while lingering, or alone): re-run its share without lingering
+                    replace(k, e)
+                    submit(k, False)
+        return outputs, shares
 
     @staticmethod
     def _replay(outputs: Sequence[dict[str, Any]], step_hook: StepHook) -> bool:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Callable
 
 import numpy as np
 from stable_baselines3.common.vec_env import VecEnv
@@ -19,8 +20,9 @@ class VecEnvEvaluator(PopulationEvaluator):
     Every env slot runs a different candidate and takes the next pending (candidate, episode) job as
     soon as its episode ends; all slots share one batched forward pass per vec step. Slots left without
     a job at the end of the generation run the center policy, whose completed episodes are reported
-    as a free evaluation of the mean. At the start of each generation the VecEnv is re-seeded and reset,
-    so a generation's outcome depends only on the seed and the parameters.
+    as a free evaluation of the mean (``n_steps`` counts their steps too). At the start of each
+    generation the VecEnv is re-seeded and reset, so a generation's outcome depends only on the seed
+    and the parameters.
 
     :param env: The vectorized environment.
     """
@@ -36,7 +38,15 @@ class VecEnvEvaluator(PopulationEvaluator):
         n_episodes: int,
         seed: int,
         step_hook: StepHook | None = None,
+        linger: Callable[[], bool] | None = None,
     ) -> PopulationResult:
+        """
+        See :meth:`PopulationEvaluator.evaluate`.
+
+        :param linger: Called once the candidates' episodes have all ended, and again before every further vec step:
+            while it returns True, every slot keeps running the center policy. A Ray actor that has finished its
+            share uses it to stay busy until the generation's last candidate episode, on any actor, has ended.
+        """
         env = self.env
         n_envs = env.num_envs
         n_candidates = population.shape[0]
@@ -66,7 +76,7 @@ class VecEnvEvaluator(PopulationEvaluator):
         env.seed(seed)
         obs = env.reset()
 
-        while remaining > 0:
+        while remaining > 0 or (linger is not None and linger()):
             flat_obs = policy.flatten_obs(obs)  # type: ignore[arg-type]
             result.obs_stats.add(flat_obs if active.all() else flat_obs[active])
             actions = forward(slot_params, flat_obs)
