@@ -115,6 +115,30 @@ def test_idle_slots_run_the_center() -> None:
     assert set(result.center_lengths) == {center_length}
 
 
+def test_linger_keeps_all_slots_on_the_center() -> None:
+    """``linger`` is asked only once the candidates are done; while it says True, every slot runs the center."""
+    policy = LinearPolicy(ToyEnv().observation_space, ToyEnv().action_space)
+    population = make_population(policy, 3, seed=2)
+    center = np.array([5.0, 0.0])  # two-step center episodes
+    plain = VecEnvEvaluator(toy_vec_env(4)).evaluate(policy, population, center, 1, seed=0)
+    counter = [0]
+    asked = []
+
+    def linger() -> bool:
+        asked.append(counter[0])
+        return len(asked) <= 6  # six more vec steps
+
+    result = VecEnvEvaluator(toy_vec_env(4, counter)).evaluate(policy, population, center, 1, seed=0, linger=linger)
+    # First asked at the step the plain run ended on; the candidates' results are unchanged.
+    assert asked[0] == plain.n_steps
+    np.testing.assert_array_equal(result.returns, plain.returns)
+    np.testing.assert_array_equal(result.obs_stats.total, plain.obs_stats.total)
+    assert result.n_steps == counter[0] == plain.n_steps + 6 * 4
+    # Six steps of 4 slots on the two-step center: at least 3 more center episodes per slot, all alike.
+    assert len(result.center_returns) >= len(plain.center_returns) + 4 * 2
+    assert set(result.center_lengths) == {2}
+
+
 def test_step_hook_stops_promptly() -> None:
     policy = LinearPolicy(ToyEnv().observation_space, ToyEnv().action_space)
     population = make_population(policy, 6)
