@@ -218,6 +218,7 @@ class RecordingEvalCallback(EvalCallback):
     :param log_path: Folder for SB3's ``evaluations.npz``.
     :param budget_seconds: Stop training after this much training wall-clock (None: no limit).
     :param progress: Progress line.
+    :param stop_at: Stop training once an evaluation's mean return reaches this value (None: never).
     """
 
     def __init__(
@@ -229,17 +230,20 @@ class RecordingEvalCallback(EvalCallback):
         log_path: str,
         budget_seconds: float | None,
         progress: Progress,
+        stop_at: float | None = None,
     ) -> None:
         super().__init__(
             eval_env,
             n_eval_episodes=n_eval_episodes,
             eval_freq=eval_freq,
             log_path=log_path,
+            best_model_save_path=log_path,
             deterministic=True,
             verbose=0,
         )
         self.csv_path = csv_path
         self.budget_seconds = budget_seconds
+        self.stop_at = stop_at
         self.progress = progress
         self.rows: list[dict[str, float]] = []
         self.eval_seconds = 0.0
@@ -293,6 +297,8 @@ class RecordingEvalCallback(EvalCallback):
         self.progress.update(self.num_timesteps, train_s, self.rows[-1]["mean_return"] if self.rows else None)
         if self.budget_seconds is not None and train_s >= self.budget_seconds:
             return False
+        if self.stop_at is not None and self.rows and self.rows[-1]["mean_return"] >= self.stop_at:
+            return False
         return continue_training
 
     def _on_training_end(self) -> None:
@@ -316,6 +322,7 @@ def run_one(
     verbose: int = 0,
     overrides: dict[str, Any] | None = None,
     command: str = "",
+    stop_at: float | None = None,
 ) -> dict[str, Any]:
     """
     Train one (algorithm, env, seed) run through rl-zoo's ExperimentManager and record its evaluations.
@@ -332,6 +339,7 @@ def run_one(
     :param verbose: Verbosity of the model (0: progress line only).
     :param overrides: Hyperparameters replacing the config's (as rl-zoo's ``-params``).
     :param command: Command line of the comparison, for the record.
+    :param stop_at: Stop training once an evaluation reaches this mean return (None: run the whole budget).
     :return: The run summary (also written to ``summary.json``).
     """
     config, note = config_for(algo, env_id, out)
@@ -373,6 +381,7 @@ def run_one(
         log_path=str(run_dir),
         budget_seconds=seconds,
         progress=progress,
+        stop_at=stop_at,
     )
     start = time.perf_counter()
     try:
@@ -670,6 +679,9 @@ def main(argv: list[str] | None = None) -> Path:
     parser.add_argument("--out", default="results/compare", help="output folder")
     parser.add_argument("--band", choices=["minmax", "std"], default="minmax", help="band over seeds in the plots")
     parser.add_argument("--threshold", nargs="*", default=[], help="ENV_ID=RETURN for the time-to-threshold column")
+    parser.add_argument(
+        "--stop-at-threshold", action="store_true", help="end a run once an evaluation reaches its --threshold"
+    )
     parser.add_argument("--skip-existing", action="store_true", help="skip runs that already have a summary.json")
     parser.add_argument("--keep-going", action="store_true", help="record a failed run and go on with the others")
     parser.add_argument("--report-only", action="store_true", help="only redraw plots and table from existing runs")
@@ -722,6 +734,7 @@ def main(argv: list[str] | None = None) -> Path:
                     verbose=args.verbose,
                     overrides=overrides.get(algo),
                     command=command,
+                    stop_at=thresholds.get(env_id) if args.stop_at_threshold else None,
                 )
             except Exception:
                 if not args.keep_going:

@@ -34,8 +34,12 @@ class ARS(PopulationAlgorithm):
     :param n_top: Number of best directions used in the update (``b`` in the paper); defaults to ``n_delta``.
     :param learning_rate: Step size ``alpha``, a float or a schedule.
     :param delta_std: Exploration noise ``nu``, a float or a schedule.
-    :param zero_policy: Start from all-zero parameters (as in the paper).
+    :param zero_policy: Start with the output layer at zero (hidden layers keep their random initialization; a
+        linear policy starts all-zero, as in the ARS paper).
     :param alive_bonus_offset: Added to the fitness once per step, to cancel alive bonuses (e.g. -1 on Hopper).
+    :param reward_clip: Clip each step's reward to ``(low, high)`` in the fitness only (``None``: no clipping).
+    :param terminal_reward: In the fitness only, replace the reward of an episode's terminating step (e.g. ``0`` for
+        BipedalWalker's -100 fall penalty); ``None`` keeps it. See :class:`~sb3_es.evaluation.RewardShaping`.
     :param n_eval_episodes: Episodes per candidate.
     :param policy_kwargs: Keyword arguments for the policy (``net_arch``, ``normalize_observations``, ...).
     :param stats_window_size: Number of episodes averaged in ``rollout/ep_rew_mean``.
@@ -67,6 +71,8 @@ class ARS(PopulationAlgorithm):
         delta_std: float | Schedule = 0.05,
         zero_policy: bool = True,
         alive_bonus_offset: float = 0,
+        reward_clip: tuple[float, float] | None = None,
+        terminal_reward: float | None = None,
         n_eval_episodes: int = 1,
         policy_kwargs: dict[str, Any] | None = None,
         stats_window_size: int = 100,
@@ -90,6 +96,8 @@ class ARS(PopulationAlgorithm):
             learning_rate=learning_rate,
             n_eval_episodes=n_eval_episodes,
             alive_bonus_offset=alive_bonus_offset,
+            reward_clip=reward_clip,
+            terminal_reward=terminal_reward,
             zero_policy=zero_policy,
             policy_kwargs=policy_kwargs,
             stats_window_size=stats_window_size,

@@ -35,8 +35,12 @@ class CMAES(PopulationAlgorithm):
     :param restarts: ``None``, ``"ipop"`` or ``"bipop"``.
     :param max_restarts: Maximum number of restarts.
     :param cma_options: Other pycma options, passed through.
-    :param zero_policy: Start from all-zero parameters instead of the policy's initialization.
+    :param zero_policy: Start with the output layer at zero (hidden layers keep their random initialization; a
+        linear policy starts all-zero, as in the ARS paper).
     :param alive_bonus_offset: Added to the fitness once per step.
+    :param reward_clip: Clip each step's reward to ``(low, high)`` in the fitness only (``None``: no clipping).
+    :param terminal_reward: In the fitness only, replace the reward of an episode's terminating step (e.g. ``0`` for
+        BipedalWalker's -100 fall penalty); ``None`` keeps it. See :class:`~sb3_es.evaluation.RewardShaping`.
     :param n_eval_episodes: Episodes per candidate.
     :param policy_kwargs: Keyword arguments for the policy.
     :param stats_window_size: Episodes averaged in ``rollout/ep_rew_mean``.
@@ -64,6 +68,8 @@ class CMAES(PopulationAlgorithm):
         cma_options: dict[str, Any] | None = None,
         zero_policy: bool = False,
         alive_bonus_offset: float = 0,
+        reward_clip: tuple[float, float] | None = None,
+        terminal_reward: float | None = None,
         n_eval_episodes: int = 1,
         policy_kwargs: dict[str, Any] | None = None,
         stats_window_size: int = 100,
@@ -83,6 +89,8 @@ class CMAES(PopulationAlgorithm):
             learning_rate=1.0,  # unused: CMA-ES adapts its own step size
             n_eval_episodes=n_eval_episodes,
             alive_bonus_offset=alive_bonus_offset,
+            reward_clip=reward_clip,
+            terminal_reward=terminal_reward,
             zero_policy=zero_policy,
             policy_kwargs=policy_kwargs,
             stats_window_size=stats_window_size,

@@ -166,6 +166,12 @@ class FlatPolicy(BasePolicy):
         """:return: The trainable parameters as one float64 vector."""
         return th.nn.utils.parameters_to_vector(self.parameters()).detach().cpu().double().numpy()
 
+    def output_layer_slice(self) -> slice:
+        """:return: Where the output layer's weight and bias lie in the flat vector (all of it for a linear policy)."""
+        linear = [slices for kind, _, slices in self._layout if kind == "linear"]
+        last = linear[-1]
+        return slice(last[0][0], last[-1][1])
+
     def load_from_vector(self, vector: np.ndarray) -> None:
         """
         Write a flat vector into the trainable parameters.

@@ -18,7 +18,7 @@ from stable_baselines3.common.utils import safe_mean
 
 from sb3_es.common.base_class import ESBaseAlgorithm
 from sb3_es.common.policies import FlatPolicy, LinearPolicy, MlpPolicy
-from sb3_es.evaluation import PopulationEvaluator, PopulationResult, VecEnvEvaluator
+from sb3_es.evaluation import PopulationEvaluator, PopulationResult, RewardShaping, VecEnvEvaluator
 from sb3_es.strategies import Strategy
 from sb3_es.strategies.noise import NoiseTablePopulation, SharedNoiseTable
 
@@ -59,16 +59,23 @@ class PopulationAlgorithm(ESBaseAlgorithm):
     fitness goes back to the strategy (``tell``), the observation statistics are updated, and the
     policy takes the strategy's new center.
 
-    Fitness of a candidate: mean return over ``n_eval_episodes`` episodes plus
-    ``alive_bonus_offset`` times the mean episode length. A non-finite fitness raises an error naming
-    the candidate and leaves the parameters unchanged.
+    Fitness of a candidate: its mean return over ``n_eval_episodes`` episodes, each step's reward first
+    shaped by ``terminal_reward``, ``reward_clip`` and ``alive_bonus_offset`` (see
+    :class:`~sb3_es.evaluation.RewardShaping`). The shaping changes the fitness only: the logged
+    ``rollout/ep_rew_mean``, the center returns, Monitor files and ``EvalCallback`` see the env's raw reward.
+    A non-finite fitness raises an error naming the candidate and leaves the parameters unchanged.
 
     :param policy: Policy class or alias (``"MlpPolicy"``, ``"LinearPolicy"``).
     :param env: Environment, env id, or VecEnv. Every env slot evaluates a different candidate.
     :param learning_rate: Step size (float or schedule); its meaning depends on the algorithm.
     :param n_eval_episodes: Episodes per candidate.
     :param alive_bonus_offset: Added to the fitness once per step, to cancel alive bonuses.
-    :param zero_policy: Start from all-zero parameters instead of the policy's random initialization.
+    :param reward_clip: ``(low, high)``: clip each step's reward to this range in the fitness (``None``: no clipping).
+    :param terminal_reward: In the fitness, the reward of a step that terminates an episode (a fall, not a time
+        limit) is replaced by this value, e.g. ``0`` to cancel BipedalWalker's -100 fall penalty (``None``: keep it).
+    :param zero_policy: Start with the output layer at zero (the action does not depend on the observation);
+        hidden layers keep the policy's random initialization, so that an MLP learns from the first step. A
+        linear policy then starts all-zero, as in the ARS paper. ``False`` keeps the whole initialization.
     :param policy_kwargs: Keyword arguments for the policy.
     :param stats_window_size: Number of episodes averaged in ``rollout/ep_rew_mean``.
     :param tensorboard_log: TensorBoard log directory.
@@ -97,6 +104,8 @@ class PopulationAlgorithm(ESBaseAlgorithm):
         n_eval_episodes: int = 1,
         alive_bonus_offset: float = 0.0,
         zero_policy: bool = True,
+        reward_clip: tuple[float, float] | None = None,
+        terminal_reward: float | None = None,
         policy_kwargs: dict[str, Any] | None = None,
         stats_window_size: int = 100,
         tensorboard_log: str | None = None,
@@ -116,6 +125,9 @@ class PopulationAlgorithm(ESBaseAlgorithm):
         check_positive("learning_rate", learning_rate)
         self.n_eval_episodes = int(n_eval_episodes)
         self.alive_bonus_offset = float(alive_bonus_offset)
+        shaping = RewardShaping.create(reward_clip, terminal_reward, self.alive_bonus_offset)
+        self.reward_clip = shaping.reward_clip
+        self.terminal_reward = shaping.terminal_reward
         self.zero_policy = zero_policy
         self.strategy: Strategy | None = None
         self._env_rng: np.random.Generator | None = None
@@ -140,7 +152,9 @@ class PopulationAlgorithm(ESBaseAlgorithm):
         self.policy = policy.to(self.device)
         if self.strategy is None:  # a loaded model brings its strategy (and its random state)
             strategy_seed, env_seed = np.random.SeedSequence(self.seed).spawn(2)
-            center = np.zeros(self.policy.num_params) if self.zero_policy else self.policy.parameters_to_vector()
+            center = self.policy.parameters_to_vector()
+            if self.zero_policy:
+                center[self.policy.output_layer_slice()] = 0.0
             self.strategy = self._make_strategy(center, strategy_seed)
             self._env_rng = np.random.default_rng(env_seed)
         self.policy.load_from_vector(self.strategy.center)
@@ -163,6 +177,13 @@ class PopulationAlgorithm(ESBaseAlgorithm):
         """
         assert self.strategy is not None
         return self.strategy.ask()
+
+    @property
+    def reward_shaping(self) -> RewardShaping:
+        """:return: The per-step reward shaping of the fitness, from the current hyperparameters."""
+        return RewardShaping.create(
+            getattr(self, "reward_clip", None), getattr(self, "terminal_reward", None), self.alive_bonus_offset
+        )
 
     def _excluded_save_params(self) -> list[str]:
         return [*super()._excluded_save_params(), "evaluator", "_evaluator", "_env_id"]
@@ -268,12 +289,12 @@ class PopulationAlgorithm(ESBaseAlgorithm):
             return not self._stop_training
 
         result = evaluator.evaluate(
-            self.policy, population, self.strategy.center, self.n_eval_episodes, seed, step_hook
+            self.policy, population, self.strategy.center, self.n_eval_episodes, seed, step_hook, self.reward_shaping
         )
         callback.on_rollout_end()
         if result.stopped:
             return False
-        fitness = result.returns.mean(axis=1) + self.alive_bonus_offset * result.lengths.mean(axis=1)
+        fitness = result.fitness_returns.mean(axis=1)
         for key, value in self.strategy.tell(fitness).items():
             self.logger.record(f"train/{key}", value)
         if self.policy.normalize_observations:
@@ -297,6 +318,7 @@ class PopulationAlgorithm(ESBaseAlgorithm):
             )
         self.logger.record("rollout/candidate_return_mean", float(result.returns.mean()))
         self.logger.record("rollout/candidate_return_max", float(result.returns.mean(axis=1).max()))
+        self.logger.record("rollout/fitness_mean", float(fitness.mean()))
         self.logger.record("rollout/fitness_std", float(fitness.std()))
         if result.center_returns:
             self.logger.record("rollout/center_return", float(np.mean(result.center_returns)))

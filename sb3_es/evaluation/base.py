@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from sb3_es.common.policies import FlatPolicy
+from sb3_es.evaluation.shaping import RewardShaping
 from sb3_es.strategies.noise import NoiseTablePopulation
 
 #: Called once per vec step with ``(n_envs, infos, dones)``; returning False stops the evaluation.
@@ -76,6 +77,8 @@ class PopulationResult:
     :param center_returns: Returns of completed episodes of the center (mean) policy, run by idle slots.
     :param center_lengths: Lengths of those episodes.
     :param stopped: True when a callback stopped the evaluation: the results are then incomplete.
+    :param shaped_returns: Fitness of each episode under a :class:`~sb3_es.evaluation.RewardShaping`, same shape as
+        ``returns``; ``None`` when no shaping was asked for (the fitness is then ``returns``).
     """
 
     returns: np.ndarray
@@ -86,18 +89,28 @@ class PopulationResult:
     center_returns: list[float] = field(default_factory=list)
     center_lengths: list[int] = field(default_factory=list)
     stopped: bool = False
+    shaped_returns: np.ndarray | None = None
+
+    @property
+    def fitness_returns(self) -> np.ndarray:
+        """:return: The per-episode fitness: ``shaped_returns`` if shaping was applied, else ``returns``."""
+        return self.returns if self.shaped_returns is None else self.shaped_returns
 
     @classmethod
-    def empty(cls, n_candidates: int, n_episodes: int, obs_dim: int) -> PopulationResult:
+    def empty(cls, n_candidates: int, n_episodes: int, obs_dim: int, shaped: bool = False) -> PopulationResult:
         """
         :param n_candidates: Candidates in the population.
         :param n_episodes: Episodes per candidate.
         :param obs_dim: Size of a flattened observation.
+        :param shaped: Whether to allocate ``shaped_returns``.
         :return: A result with zero returns and lengths and no observations, to be filled in.
         """
         returns = np.zeros((n_candidates, n_episodes))
         lengths = np.zeros((n_candidates, n_episodes), dtype=np.int64)
-        return cls(returns, lengths, ObsStats.zeros(obs_dim))
+        result = cls(returns, lengths, ObsStats.zeros(obs_dim))
+        if shaped:
+            result.shaped_returns = np.zeros((n_candidates, n_episodes))
+        return result
 
 
 class PopulationEvaluator(ABC):
@@ -112,6 +125,7 @@ class PopulationEvaluator(ABC):
         n_episodes: int,
         seed: int,
         step_hook: StepHook | None = None,
+        shaping: RewardShaping | None = None,
     ) -> PopulationResult:
         """
         Evaluate every candidate for ``n_episodes`` episodes.
@@ -122,6 +136,7 @@ class PopulationEvaluator(ABC):
         :param n_episodes: Episodes per candidate.
         :param seed: Seed for the environments' resets in this generation (makes runs reproducible).
         :param step_hook: Called once per vec step; returning False stops the evaluation.
+        :param shaping: Per-step reward shaping of the fitness (``shaped_returns``); ``None`` for none.
         :return: The results.
         """
 

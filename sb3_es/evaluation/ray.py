@@ -41,6 +41,7 @@ from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv
 
 from sb3_es.common.policies import FlatPolicy
 from sb3_es.evaluation.base import PopulationEvaluator, PopulationResult, StepHook
+from sb3_es.evaluation.shaping import RewardShaping
 from sb3_es.evaluation.vec_env import VecEnvEvaluator
 from sb3_es.strategies.noise import NoiseTablePopulation, noise_rows
 
@@ -195,7 +196,7 @@ class _Worker:
             return True
 
         start = time.perf_counter()
-        result = self.evaluator.evaluate(policy, rows, center, 1, seed, record, linger)
+        result = self.evaluator.evaluate(policy, rows, center, 1, seed, record, payload.get("shaping"), linger)
         eval_time = time.perf_counter() - start
         n_envs = self.env.num_envs
         dones = np.stack(dones_log) if dones_log else np.zeros((0, n_envs), dtype=bool)
@@ -449,24 +450,28 @@ class RayEvaluator(PopulationEvaluator):
         n_episodes: int,
         seed: int,
         step_hook: StepHook | None = None,
+        shaping: RewardShaping | None = None,
     ) -> PopulationResult:
         start_time = time.perf_counter()
         self.start()
+        shape = shaping is not None and not shaping.is_identity
         try:
-            outputs, shares = self._run_remote(policy, population, center, n_episodes, seed)
+            outputs, shares = self._run_remote(policy, population, center, n_episodes, seed, shaping)
         except BaseException:
             # Unfinished tasks would delay the next generation (and an interrupted run must not leave busy
             # actors behind): start afresh next time.
             self._kill_actors()
             raise
         n_candidates = population.shape[0]
-        result = PopulationResult.empty(n_candidates, n_episodes, policy.obs_dim)
+        result = PopulationResult.empty(n_candidates, n_episodes, policy.obs_dim, shaped=shape)
         returns, lengths = result.returns, result.lengths
         for share, output in zip(shares, outputs):
             part: PopulationResult = output["result"]
             candidates, episodes = share % n_candidates, share // n_candidates
             returns[candidates, episodes] = part.returns[:, 0]
             lengths[candidates, episodes] = part.lengths[:, 0]
+            if result.shaped_returns is not None:
+                result.shaped_returns[candidates, episodes] = part.fitness_returns[:, 0]
             result.obs_stats.merge(part.obs_stats)
             result.n_steps += part.n_steps
             result.ep_infos.extend(part.ep_infos)
@@ -492,6 +497,7 @@ class RayEvaluator(PopulationEvaluator):
         center: np.ndarray,
         n_episodes: int,
         seed: int,
+        shaping: RewardShaping | None = None,
     ) -> tuple[list[dict[str, Any]], list[np.ndarray]]:
         """Run the shares on the actors (replacing dead ones); return their outputs and job indices."""
         ray = _import_ray()
@@ -512,6 +518,7 @@ class RayEvaluator(PopulationEvaluator):
             "obs_count": float(policy.obs_count.item()),
             "population": None,
             "noise": None,
+            "shaping": shaping,
         }
         if isinstance(population, NoiseTablePopulation):
             payload["noise"] = (population.table.key, np.asarray(population.offsets), np.asarray(population.scales))

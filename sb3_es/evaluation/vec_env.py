@@ -10,6 +10,7 @@ from stable_baselines3.common.vec_env import VecEnv
 
 from sb3_es.common.policies import FlatPolicy
 from sb3_es.evaluation.base import PopulationEvaluator, PopulationResult, StepHook
+from sb3_es.evaluation.shaping import RewardShaping
 from sb3_es.strategies.noise import NoiseTablePopulation
 
 
@@ -38,6 +39,7 @@ class VecEnvEvaluator(PopulationEvaluator):
         n_episodes: int,
         seed: int,
         step_hook: StepHook | None = None,
+        shaping: RewardShaping | None = None,
         linger: Callable[[], bool] | None = None,
     ) -> PopulationResult:
         """
@@ -50,8 +52,9 @@ class VecEnvEvaluator(PopulationEvaluator):
         env = self.env
         n_envs = env.num_envs
         n_candidates = population.shape[0]
-        result = PopulationResult.empty(n_candidates, n_episodes, policy.obs_dim)
-        returns, lengths = result.returns, result.lengths
+        shape = shaping is not None and not shaping.is_identity
+        result = PopulationResult.empty(n_candidates, n_episodes, policy.obs_dim, shaped=shape)
+        returns, lengths, shaped_returns = result.returns, result.lengths, result.shaped_returns
 
         params = np.asarray(population, dtype=np.float32)
         center_params = np.asarray(center, dtype=np.float32)
@@ -73,6 +76,7 @@ class VecEnvEvaluator(PopulationEvaluator):
             assign(slot)
         ep_return = np.zeros(n_envs)
         ep_length = np.zeros(n_envs, dtype=np.int64)
+        ep_shaped = np.zeros(n_envs)
         env.seed(seed)
         obs = env.reset()
 
@@ -84,6 +88,9 @@ class VecEnvEvaluator(PopulationEvaluator):
             result.n_steps += n_envs
             ep_return += rewards
             ep_length += 1
+            if shape:
+                assert shaping is not None
+                ep_shaped += shaping(rewards, dones, infos)
             for slot in np.flatnonzero(dones).tolist():
                 job = slot_job[slot]
                 if job is None:
@@ -92,11 +99,14 @@ class VecEnvEvaluator(PopulationEvaluator):
                 else:
                     returns[job] = ep_return[slot]
                     lengths[job] = ep_length[slot]
+                    if shaped_returns is not None:
+                        shaped_returns[job] = ep_shaped[slot]
                     remaining -= 1
                     if "episode" in infos[slot]:
                         result.ep_infos.append(infos[slot]["episode"])
                 ep_return[slot] = 0.0
                 ep_length[slot] = 0
+                ep_shaped[slot] = 0.0
                 assign(slot)
             if step_hook is not None and not step_hook(n_envs, infos, dones):
                 result.stopped = remaining > 0
