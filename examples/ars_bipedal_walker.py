@@ -2,10 +2,11 @@
 
 Run::
 
-    python examples/ars_bipedal_walker.py --timesteps 2000000 --n-envs 2
+    python examples/ars_bipedal_walker.py --timesteps 5000000 --n-envs 2
 
-Hyperparameters start from rl-baselines3-zoo's ``ars.yml`` entry for BipedalWalker-v3 (linear policy,
-observation normalization inside the policy, alive bonus offset). Each env slot evaluates a different
+Linear policy, observation normalization inside the policy, and each step's reward clipped to [-1, 1] in
+the fitness only (the -100 fall penalty becomes -1; see docs/guide/shaping.md): the configuration of
+``sb3_es/hyperparams/ars.yml`` measured in docs/benchmarks.md. Each env slot evaluates a different
 candidate; ``--subproc`` puts each env in its own process.
 """
 
@@ -22,7 +23,7 @@ from sb3_es import ARS
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--timesteps", type=int, default=2_000_000)
+    parser.add_argument("--timesteps", type=int, default=5_000_000)
     parser.add_argument("--n-envs", type=int, default=2)
     parser.add_argument("--subproc", action="store_true")
     parser.add_argument("--seed", type=int, default=0)
@@ -35,11 +36,11 @@ def main() -> None:
     model = ARS(
         "LinearPolicy",
         env,
-        n_delta=40,
-        n_top=30,
+        n_delta=16,
+        n_top=16,
         learning_rate=0.02,
-        delta_std=0.0075,
-        alive_bonus_offset=-0.1,
+        delta_std=0.03,
+        reward_clip=(-1, 1),
         tensorboard_log=args.tensorboard_log,
         seed=args.seed,
         verbose=1,

@@ -1,0 +1,128 @@
+"""Reward shaping of the fitness (raw returns stay logged) and the MLP initialization of ``zero_policy``."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import pytest
+from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.evaluation import evaluate_policy
+
+from sb3_es import ARS, CMAES, OpenES
+from sb3_es.evaluation import PopulationResult, RewardShaping, VecEnvEvaluator
+
+POPULATION_ALGOS: list[tuple[type, dict[str, Any]]] = [
+    (ARS, dict(n_delta=2)),
+    (OpenES, dict(population_size=4)),
+    (CMAES, dict(population_size=4)),
+]
+
+
+class RecordingEvaluator(VecEnvEvaluator):
+    """The local engine, keeping every generation's result."""
+
+    def __init__(self, env: Any) -> None:
+        super().__init__(env)
+        self.results: list[PopulationResult] = []
+
+    def evaluate(self, *args: Any, **kwargs: Any) -> PopulationResult:
+        result = super().evaluate(*args, **kwargs)
+        self.results.append(result)
+        return result
+
+
+def test_shaping_replaces_terminal_rewards_only_on_termination() -> None:
+    shaping = RewardShaping.create(terminal_reward=0.0)
+    rewards = np.array([-100.0, -100.0, 0.5])
+    dones = np.array([True, True, False])
+    infos = [{}, {"TimeLimit.truncated": True}, {}]
+    np.testing.assert_array_equal(shaping(rewards, dones, infos), [0.0, -100.0, 0.5])
+
+
+def test_shaping_order_terminal_then_clip_then_offset() -> None:
+    shaping = RewardShaping.create(reward_clip=[-1, 1], terminal_reward=-5.0, alive_bonus_offset=-0.1)
+    out = shaping(np.array([-100.0, 3.0, 0.5]), np.array([True, False, False]), [{}, {}, {}])
+    np.testing.assert_allclose(out, [-1.1, 0.9, 0.4])
+    assert not shaping.is_identity
+    assert RewardShaping.create().is_identity
+
+
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        (dict(reward_clip=(1, -1)), "low < high"),
+        (dict(reward_clip=5), "two finite numbers"),
+        (dict(reward_clip=(0, float("inf"))), "two finite numbers"),
+        (dict(terminal_reward=float("nan")), "terminal_reward=nan"),
+    ],
+)
+def test_bad_shaping_is_refused_at_construction(kwargs: dict[str, Any], message: str) -> None:
+    with pytest.raises(ValueError, match=message):
+        ARS("LinearPolicy", "CartPole-v1", **kwargs)
+
+
+@pytest.mark.parametrize("algo, algo_kwargs", POPULATION_ALGOS)
+def test_shaping_changes_the_fitness_not_the_logged_returns(algo: type, algo_kwargs: dict[str, Any]) -> None:
+    """CartPole pays 1 per step; a fall (termination) pays -5 in the fitness, a time limit keeps its 1."""
+    env = make_vec_env("CartPole-v1", n_envs=2, seed=0)
+    evaluator = RecordingEvaluator(env)
+    model = algo(
+        "LinearPolicy", env, terminal_reward=-5.0, reward_clip=(-10, 0.5), evaluator=evaluator, seed=0, **algo_kwargs
+    )
+    model.learn(1, log_interval=10)
+    result = evaluator.results[-1]
+    assert result.shaped_returns is not None
+    # Raw: 1 per step. Shaped: 0.5 per step (clip), the terminating step -5 instead.
+    np.testing.assert_array_equal(result.returns, result.lengths)
+    terminated = result.lengths < 500
+    expected = np.where(terminated, 0.5 * (result.lengths - 1) - 5.0, 0.5 * result.lengths)
+    np.testing.assert_allclose(result.shaped_returns, expected)
+    logged = sorted(info["r"] for info in model.ep_info_buffer)
+    assert logged == sorted(result.returns.ravel().tolist())
+    assert model.logger.name_to_value["rollout/fitness_mean"] == pytest.approx(expected.mean(axis=1).mean())
+
+
+def test_no_shaping_gives_raw_fitness_and_no_extra_array() -> None:
+    env = make_vec_env("CartPole-v1", n_envs=2, seed=0)
+    evaluator = RecordingEvaluator(env)
+    ARS("LinearPolicy", env, n_delta=2, evaluator=evaluator, seed=0).learn(1)
+    assert evaluator.results[-1].shaped_returns is None
+    assert evaluator.results[-1].fitness_returns is evaluator.results[-1].returns
+
+
+def test_alive_bonus_offset_is_a_per_step_shaping() -> None:
+    env = make_vec_env("CartPole-v1", n_envs=1, seed=0)
+    evaluator = RecordingEvaluator(env)
+    ARS("LinearPolicy", env, n_delta=2, alive_bonus_offset=-0.25, evaluator=evaluator, seed=0).learn(1)
+    result = evaluator.results[-1]
+    np.testing.assert_allclose(result.fitness_returns, 0.75 * result.lengths)
+
+
+def test_shaping_is_saved_and_loaded(tmp_path: Any) -> None:
+    model = ARS("LinearPolicy", "CartPole-v1", n_delta=2, reward_clip=[-1, 1], terminal_reward=0, seed=0)
+    model.save(tmp_path / "model")
+    loaded = ARS.load(tmp_path / "model")
+    assert loaded.reward_shaping == model.reward_shaping == RewardShaping((-1.0, 1.0), 0.0, 0.0)
+
+
+# ---------------------------------------------------------------------------- zero_policy
+@pytest.mark.parametrize("algo, algo_kwargs", POPULATION_ALGOS)
+def test_zero_policy_zeroes_only_the_output_layer(algo: type, algo_kwargs: dict[str, Any]) -> None:
+    model = algo("MlpPolicy", "Pendulum-v1", zero_policy=True, seed=0, **algo_kwargs)
+    center = model.strategy.center
+    out = model.policy.output_layer_slice()
+    assert out.stop == model.policy.num_params
+    np.testing.assert_array_equal(center[out], 0.0)
+    assert np.all(center[: out.start] != 0.0) or np.count_nonzero(center[: out.start]) > 0.9 * out.start
+    linear = algo("LinearPolicy", "Pendulum-v1", zero_policy=True, seed=0, **algo_kwargs)
+    np.testing.assert_array_equal(linear.strategy.center, 0.0)
+
+
+def test_zero_policy_mlp_predicts_zero_at_start_and_then_learns() -> None:
+    """The output layer at zero gives the zero action; the hidden layers give a first-order signal at once."""
+    model = ARS("MlpPolicy", "CartPole-v1", seed=1)
+    np.testing.assert_array_equal(model.predict(np.ones(4, dtype=np.float32))[0], 0)  # argmax of zero outputs
+    model.learn(20_000)
+    mean, _ = evaluate_policy(model, make_vec_env("CartPole-v1", n_envs=1, seed=7), n_eval_episodes=10)
+    assert mean >= 475
