@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import subprocess
 import time
 from pathlib import Path
 from typing import Any
@@ -64,7 +65,12 @@ def main() -> None:
     print(f"median over {len(rows)} seeds: {median:.1f}")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    info = {"system": get_system_info(print_info=False)[0], "date": time.strftime("%Y-%m-%d %H:%M %Z")}
+    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
+    info = {
+        "system": get_system_info(print_info=False)[0],
+        "date": time.strftime("%Y-%m-%d %H:%M %Z"),
+        "commit": commit,
+    }
     record = {"args": vars(args), "kwargs": kwargs, "runs": rows, "median": median, **info}
     (out / "headline.json").write_text(json.dumps(record, indent=2, default=str))
 
