@@ -5,9 +5,9 @@ with every default, then ``evaluate_policy`` (deterministic, 10 episodes) on a f
 Examples::
 
     python benchmarks/headline.py --seeds 0 1 2                       # the defaults, three seeds
-    python benchmarks/headline.py --seeds 0 --set n_delta=16 reward_clip=[-1,1]   # a variation
+    python benchmarks/headline.py --seeds 0 --steps 1e6 3e6 --set reward_clip=[-1,1]   # a variation
 
-Prints one line per seed and the median; writes ``<out>/headline.json``.
+Prints one line per seed and budget, and the median at each budget; writes ``<out>/headline.json``.
 """
 
 from __future__ import annotations
@@ -29,18 +29,37 @@ from stable_baselines3.common.utils import get_system_info
 import sb3_es
 
 
-def run(algo: str, policy: str, env_id: str, seed: int, steps: int, episodes: int, kwargs: dict[str, Any]) -> dict:
+def run(
+    algo: str, policy: str, env_id: str, seed: int, budgets: list[int], episodes: int, kwargs: dict[str, Any]
+) -> list[dict]:
     """
-    Train one model and evaluate it.
+    Train one model, evaluating it each time ``num_timesteps`` reaches the next budget.
 
-    :return: Seed, steps, wall-clock and the evaluation's mean and std.
+    ``learn(b1)`` then ``learn(b2 - num_timesteps, reset_num_timesteps=False)`` is the run ``learn(b2)`` would
+    make (constant hyperparameters), with an evaluation between.
+
+    :return: One row per budget: seed, steps, training wall-clock and the evaluation's mean and std.
     """
-    start = time.perf_counter()
-    model = getattr(sb3_es, algo)(policy, env_id, seed=seed, **kwargs).learn(steps)
-    train_s = time.perf_counter() - start
-    eval_env = make_vec_env(env_id, n_envs=1, seed=10_000 + seed)
-    mean, std = evaluate_policy(model, eval_env, n_eval_episodes=episodes, deterministic=True)
-    return {"seed": seed, "env_steps": model.num_timesteps, "train_s": round(train_s, 1), "mean": mean, "std": std}
+    model = getattr(sb3_es, algo)(policy, env_id, seed=seed, **kwargs)
+    rows, train_s = [], 0.0
+    for budget in budgets:
+        start = time.perf_counter()
+        model.learn(max(budget - model.num_timesteps, 1), reset_num_timesteps=model.num_timesteps == 0)
+        train_s += time.perf_counter() - start
+        eval_env = make_vec_env(env_id, n_envs=1, seed=10_000 + seed)
+        mean, std = evaluate_policy(model, eval_env, n_eval_episodes=episodes, deterministic=True)
+        rows.append(
+            {
+                "seed": seed,
+                "budget": budget,
+                "env_steps": model.num_timesteps,
+                "train_s": round(train_s, 1),
+                "mean": mean,
+                "std": std,
+            }
+        )
+        print(f"seed {seed}: {mean:.1f} +- {std:.1f} after {model.num_timesteps:,} steps, {train_s:.0f}s", flush=True)
+    return rows
 
 
 def main() -> None:
@@ -48,7 +67,7 @@ def main() -> None:
     parser.add_argument("--algo", default="ARS")
     parser.add_argument("--policy", default="MlpPolicy")
     parser.add_argument("--env", default="BipedalWalker-v3")
-    parser.add_argument("--steps", type=float, default=1e6)
+    parser.add_argument("--steps", nargs="+", type=float, default=[1e6], help="budgets at which to evaluate")
     parser.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
     parser.add_argument("--episodes", type=int, default=10)
     parser.add_argument("--set", nargs="*", default=[], help="KEY=VALUE constructor arguments (values read as YAML)")
@@ -56,13 +75,17 @@ def main() -> None:
     args = parser.parse_args()
     torch.set_num_threads(1)
     kwargs = {key: yaml.safe_load(value) for key, value in (item.split("=", 1) for item in args.set)}
-    rows = []
-    for seed in args.seeds:
-        row = run(args.algo, args.policy, args.env, seed, int(args.steps), args.episodes, kwargs)
-        rows.append(row)
-        print(f"seed {seed}: {row['mean']:.1f} +- {row['std']:.1f} after {row['env_steps']:,} steps, {row['train_s']}s")
-    median = float(np.median([row["mean"] for row in rows]))
-    print(f"median over {len(rows)} seeds: {median:.1f}")
+    budgets = sorted(int(b) for b in args.steps)
+    rows = [
+        row
+        for seed in args.seeds
+        for row in run(args.algo, args.policy, args.env, seed, budgets, args.episodes, kwargs)
+    ]
+    median = {}
+    for budget in budgets:
+        at = [row["mean"] for row in rows if row["budget"] == budget]
+        median[budget] = float(np.median(at))
+        print(f"{budget:,} steps: median over {len(at)} seeds {median[budget]:.1f}")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
