@@ -353,3 +353,32 @@ def test_loads_zip_saved_before_the_actor_critic_policy(name: str) -> None:
     np.testing.assert_allclose(
         model.policy.action_net.weight.detach().numpy(), expected[f"{name}_resumed_action_net_weight"], atol=1e-6
     )
+
+
+# ---------------------------------------------------------------------------- non-finite rewards
+class NaNRewardAt(BoxActionEnv):
+    """Rewards NaN at the ``nan_step``-th step since the env was created."""
+
+    def __init__(self, nan_step: int) -> None:
+        super().__init__()
+        self.nan_step = nan_step
+        self.steps = 0
+
+    def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict]:
+        obs, reward, terminated, truncated, info = super().step(action)
+        self.steps += 1
+        return obs, float("nan") if self.steps == self.nan_step else reward, terminated, truncated, info
+
+
+@pytest.mark.parametrize("use_baseline", [False, True])
+def test_nan_reward_refused_naming_step_and_episode(use_baseline: bool) -> None:
+    """Episodes of 5 steps, 2 per update: the 18th step is step 3 of episode 2 of the second update."""
+    kwargs: dict[str, Any] = dict(n_episodes=2, use_baseline=use_baseline, seed=0)
+    reference = REINFORCE("MlpPolicy", DummyVecEnv([BoxActionEnv]), **kwargs).learn(10)
+    model = REINFORCE("MlpPolicy", DummyVecEnv([lambda: NaNRewardAt(18)]), **kwargs)
+    with pytest.raises(ValueError, match=r"reward nan at step 3 of episode 2 \(env slot 0\) in update 2"):
+        model.learn(100)
+    # The first update was applied, the second refused: the weights are finite, those of one update.
+    assert model._n_updates == 1
+    for a, b in zip(params_of(reference), params_of(model)):
+        assert th.equal(a, b)

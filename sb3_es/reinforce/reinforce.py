@@ -43,6 +43,29 @@ class EpisodeBatch:
     episode_returns: np.ndarray
 
 
+def check_rewards(rewards: np.ndarray, dones: np.ndarray, keep: np.ndarray, update: int) -> None:
+    """
+    Refuse a batch whose episodes have a non-finite reward (it would make every weight NaN).
+
+    :param rewards: Rewards ``(n_steps, n_envs)`` of the vec steps of the update.
+    :param dones: Episode ends, same shape.
+    :param keep: Which steps belong to the episodes used by the update, same shape.
+    :param update: Number of the update (1 for the first of the model), for the message.
+    """
+    bad = keep & ~np.isfinite(rewards)
+    if not bad.any():
+        return
+    t, slot = (int(k) for k in np.argwhere(bad)[0])
+    ends = np.flatnonzero(dones[:t, slot])
+    episode = len(ends) + 1
+    step = t - (int(ends[-1]) if len(ends) else -1)
+    raise ValueError(
+        f"Non-finite reward {rewards[t, slot]} at step {step} of episode {episode} (env slot {slot}) in update "
+        f"{update}, {int(bad.sum())} such reward(s) in the episodes of this update. The update was not applied: the "
+        "parameters are those of the last update. Check the environment's rewards (NaN/inf)."
+    )
+
+
 class REINFORCE(ESBaseAlgorithm):
     """
     REINFORCE, the Monte-Carlo policy gradient (Williams, 1992), with discretized actions.
@@ -286,6 +309,7 @@ class REINFORCE(ESBaseAlgorithm):
         rewards_tn = np.stack(rew_buf)
         dones_tn = np.stack(done_buf)
         keep_tn = np.stack(keep_buf)
+        check_rewards(rewards_tn, dones_tn, keep_tn, self._n_updates + 1)
         returns_tn = np.zeros_like(rewards_tn)
         running = np.zeros(n_envs)
         for t in reversed(range(len(rew_buf))):
