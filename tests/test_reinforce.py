@@ -280,6 +280,7 @@ def test_dict_observation_from_dm_control() -> None:
         (dict(gamma=-0.1), r"gamma=-0.1.*\[0, 1\]"),
         (dict(max_grad_norm=0.0), "max_grad_norm=0.0"),
         (dict(policy_kwargs=dict(use_baseline=True)), "use_baseline"),
+        (dict(policy_kwargs=dict(net_arch=dict(pi=[8], vf=[8]))), r"value_net_arch for the baseline \(not dict\(pi="),
     ],
 )
 def test_invalid_hyperparameters(kwargs: dict[str, Any], match: str) -> None:
