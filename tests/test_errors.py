@@ -2,17 +2,23 @@
 
 from __future__ import annotations
 
+import base64
+import json
 import re
+import warnings
+import zipfile
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
 import pytest
+import torch as th
 from envs import ConstantObsEnv, MultiDiscreteActionEnv, NaNRewardWrapper
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.vec_env import DummyVecEnv
 
-from sb3_es import ARS
+from sb3_es import ARS, CMAES, REINFORCE, OpenES
 
 
 # ---------------------------------------------------------------------------- hyperparameters
@@ -146,3 +152,135 @@ def test_nan_rewards_after_training_leave_last_update() -> None:
         model.learn(800, reset_num_timesteps=False)
     assert_unchanged(before, model)
     assert model._n_updates == 1
+
+
+# ---------------------------------------------------------------------------- schedules during training
+@pytest.mark.parametrize(
+    ("algorithm", "kwargs", "updates_before"),
+    [
+        # A generation (ARS, OpenES) or an update (REINFORCE, one episode) is 400 or 200 Pendulum steps.
+        (ARS, dict(policy="LinearPolicy", n_delta=1), 3),
+        (OpenES, dict(policy="LinearPolicy", population_size=2), 3),
+        (REINFORCE, dict(policy="MlpPolicy", n_episodes=1), 2),
+    ],
+)
+def test_learning_rate_schedule_going_negative_during_training(algorithm, kwargs, updates_before: int) -> None:
+    """
+    ``progress - 0.5`` starts positive. ARS and OpenES check it before each generation (progress 1, 0.75,
+    0.5, 0.25: the fourth is refused), REINFORCE after collecting each update's episodes (progress 0.75,
+    0.5, 0.25: the third is refused). A schedule that ends at 0 is fine.
+    """
+    steps = 400 if algorithm is not REINFORCE else 200
+    model = algorithm(env="Pendulum-v1", learning_rate=lambda progress: progress - 0.5, seed=0, **kwargs)
+    with pytest.raises(ValueError, match=r"learning_rate schedule gave -0.25 at progress_remaining=0.25.*>= 0"):
+        model.learn(4 * steps)
+    assert model._n_updates == updates_before
+    for param in model.policy.parameters():
+        assert th.all(th.isfinite(param))
+
+
+def test_learning_rate_schedule_ending_at_zero_is_accepted() -> None:
+    model = REINFORCE("MlpPolicy", "Pendulum-v1", n_episodes=1, learning_rate=lambda progress: 0.01 * progress, seed=0)
+    model.learn(600)  # the last update sees progress 0 (it ends at 600 steps): learning rate 0
+    assert model._n_updates == 3
+
+
+# ---------------------------------------------------------------------------- algorithm hyperparameters
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        (dict(sigma_limit=-1), r"sigma_limit=-1: it must be a finite number >= 0"),
+        (dict(learning_rate_limit=-1), r"learning_rate_limit=-1: it must be a finite number >= 0"),
+        (dict(sigma_limit=float("nan")), r"sigma_limit=nan"),
+        (dict(momentum=float("nan")), r"momentum=nan: the SGD momentum must be in \[0, 1\)"),
+        (dict(momentum=float("nan"), optimizer="sgd"), r"momentum=nan"),
+        (dict(momentum=1.5, optimizer="sgd"), r"momentum=1.5"),
+        (dict(weight_decay=float("nan")), r"weight_decay=nan"),
+    ],
+)
+def test_openes_bad_limits_and_momentum(kwargs: dict, match: str) -> None:
+    with pytest.raises(ValueError, match=match):
+        OpenES("LinearPolicy", "Pendulum-v1", **kwargs)
+
+
+@pytest.mark.parametrize("max_restarts", [-1, 1.5, float("nan")])
+def test_cmaes_bad_max_restarts(max_restarts: float) -> None:
+    with pytest.raises(ValueError, match=rf"max_restarts={max_restarts}: it must be a non-negative integer"):
+        CMAES("LinearPolicy", "Pendulum-v1", max_restarts=max_restarts)
+
+
+def test_cmaes_population_too_small_for_two_point_adaptation() -> None:
+    """From 300 parameters pycma's TPA takes 2 candidates per generation and mirroring one more."""
+    match = r"population_size=2 is too small for CMA-ES on 4481 parameters.*TPA.*population_size >= 3"
+    with pytest.raises(ValueError, match=match):
+        CMAES("MlpPolicy", "Pendulum-v1", population_size=2)
+    # The smallest population that pycma runs, and population 2 on a small policy, both train.
+    for policy, size in (("MlpPolicy", 3), ("LinearPolicy", 2)):
+        model = CMAES(policy, "Pendulum-v1", population_size=size, seed=0)
+        model.learn(size * 200)
+        assert model._n_updates == 1
+
+
+def test_cmaes_full_covariance_too_large_for_memory() -> None:
+    """Refused before pycma allocates anything, with the memory needed and the fix."""
+    n = 3 * 1024 + 1024 + 1024 * 1024 + 1024 + 1024 + 1  # Pendulum, net_arch=[1024, 1024]
+    gib = 5 * 8 * n**2 / 2**30
+    with pytest.raises(MemoryError, match=rf"on {n} parameters needs about {gib:,.1f} GiB.*diagonal=True"):
+        CMAES("MlpPolicy", "Pendulum-v1", diagonal=False, policy_kwargs=dict(net_arch=[1024, 1024]))
+
+
+@pytest.mark.parametrize("algorithm", [ARS, OpenES, CMAES, REINFORCE])
+@pytest.mark.parametrize("seed", [-1, 2**32, 1.5])
+def test_seed_out_of_range(algorithm, seed: float) -> None:
+    policy = "MlpPolicy" if algorithm is REINFORCE else "LinearPolicy"
+    with pytest.raises(ValueError, match=re.escape(f"seed={seed!r}: it must be an integer in [0, 2**32 - 1]")):
+        algorithm(policy, "Pendulum-v1", seed=seed)
+
+
+@pytest.mark.parametrize("algorithm", [ARS, OpenES, CMAES])
+def test_population_policy_given_actor_critic_net_arch(algorithm) -> None:
+    with pytest.raises(ValueError, match=r"net_arch=\{'pi': \[32\], 'vf': \[32\]\}: .*no value network.*\[64, 64\]"):
+        algorithm("MlpPolicy", "Pendulum-v1", policy_kwargs=dict(net_arch=dict(pi=[32], vf=[32])))
+
+
+# ---------------------------------------------------------------------------- save files
+def test_set_parameters_refuses_another_algorithms_zip(tmp_path: Path) -> None:
+    ARS("LinearPolicy", "Pendulum-v1", seed=0).save(tmp_path / "ars.zip")
+    model = OpenES("LinearPolicy", "Pendulum-v1", seed=0)
+    with pytest.raises(ValueError, match=r"with OpenES\.set_parameters\(\): it was saved by sb3-es ARS"):
+        model.set_parameters(str(tmp_path / "ars.zip"))
+    # The way the message gives to use its weights anyway works.
+    weights = ARS.load(tmp_path / "ars.zip").policy.state_dict()
+    model.set_parameters({"policy": weights})
+    np.testing.assert_array_equal(model.strategy.center, model.policy.parameters_to_vector())
+
+
+def garble_lr_schedule(path: Path) -> Path:
+    """Copy of a save whose ``lr_schedule`` names a function that no longer exists (as after a refactoring)."""
+    garbled = path.with_name("garbled.zip")
+    with zipfile.ZipFile(path) as source, zipfile.ZipFile(garbled, "w") as target:
+        for item in source.infolist():
+            content = source.read(item)
+            if item.filename == "data":
+                data = json.loads(content)
+                data["lr_schedule"][":serialized:"] = base64.b64encode(b"csb3_es\nremoved_schedule\n.").decode()
+                content = json.dumps(data).encode()
+            target.writestr(item, content)
+    return garbled
+
+
+@pytest.mark.parametrize("algorithm", [ARS, REINFORCE])
+def test_load_with_custom_objects_does_not_warn(tmp_path: Path, algorithm) -> None:
+    policy = "MlpPolicy" if algorithm is REINFORCE else "LinearPolicy"
+    original = algorithm(policy, "Pendulum-v1", seed=0)
+    original.save(tmp_path / "model.zip")
+    garbled = garble_lr_schedule(tmp_path / "model.zip")
+    with pytest.warns(UserWarning, match="Could not deserialize object lr_schedule"):
+        algorithm.load(garbled)
+    with warnings.catch_warnings():
+        warnings.filterwarnings("error", message="Could not deserialize")
+        model = algorithm.load(garbled, custom_objects={"lr_schedule": lambda _: 0.5})
+    obs = np.zeros((4, 3), dtype=np.float32)
+    np.testing.assert_array_equal(
+        model.predict(obs, deterministic=True)[0], original.predict(obs, deterministic=True)[0]
+    )

@@ -17,6 +17,7 @@ from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.evaluation import evaluate_policy
 from stable_baselines3.common.logger import KVWriter, Logger
 from stable_baselines3.common.monitor import Monitor
+from stable_baselines3.common.policies import ActorCriticPolicy
 from stable_baselines3.common.vec_env import DummyVecEnv
 
 from sb3_es.reinforce import REINFORCE, DiscretizedPolicy, MlpPolicy
@@ -32,7 +33,7 @@ def one_torch_thread() -> Any:
 
 
 class BoxActionEnv(gym.Env):
-    """Tiny env with a 4-dim Box action space; records the actions it receives."""
+    """Tiny env with a 4-dim Box action space, deterministic once seeded; records the actions it receives."""
 
     def __init__(self, low: np.ndarray | float = -1.0, high: np.ndarray | float = 1.0, episode_length: int = 5) -> None:
         self.observation_space = spaces.Box(-1.0, 1.0, shape=(3,), dtype=np.float32)
@@ -44,7 +45,7 @@ class BoxActionEnv(gym.Env):
     def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[np.ndarray, dict]:
         super().reset(seed=seed)
         self._t = 0
-        return self.observation_space.sample(), {}
+        return self.np_random.uniform(-1, 1, size=3).astype(np.float32), {}
 
     def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict]:
         self.actions.append(np.array(action, copy=True))
@@ -279,6 +280,7 @@ def test_dict_observation_from_dm_control() -> None:
         (dict(gamma=-0.1), r"gamma=-0.1.*\[0, 1\]"),
         (dict(max_grad_norm=0.0), "max_grad_norm=0.0"),
         (dict(policy_kwargs=dict(use_baseline=True)), "use_baseline"),
+        (dict(policy_kwargs=dict(net_arch=dict(pi=[8], vf=[8]))), r"value_net_arch for the baseline \(not dict\(pi="),
     ],
 )
 def test_invalid_hyperparameters(kwargs: dict[str, Any], match: str) -> None:
@@ -321,3 +323,63 @@ def test_load_rejects_corrupt_and_foreign_files(tmp_path: Path) -> None:
     REINFORCE("MlpPolicy", "CartPole-v1", seed=0).save(tmp_path / "reinforce.zip")
     with pytest.raises(ValueError, match=r"saved by sb3-es REINFORCE"):
         ARS.load(tmp_path / "reinforce.zip")
+
+
+# ---------------------------------------------------------------------------- saves of older versions
+FIXTURES = Path(__file__).parent / "fixtures"
+
+
+@pytest.mark.parametrize("name", ["joint_baseline", "factorized"])
+def test_loads_zip_saved_before_the_actor_critic_policy(name: str) -> None:
+    """
+    ``reinforce_*_v0.zip`` were saved by main at fcb4e90, when the policy had its own ``policy_net`` /
+    ``value_net`` MLPs; the expected outputs, and the weights after 30 more steps, were recorded by that code.
+    """
+    expected = np.load(FIXTURES / "reinforce_v0_expected.npz")
+    obs = expected["obs"]
+    model = REINFORCE.load(FIXTURES / f"reinforce_{name}_v0.zip", env=BoxActionEnv(), device="cpu")
+    assert isinstance(model.policy, ActorCriticPolicy)
+    np.testing.assert_array_equal(model.predict(obs, deterministic=True)[0], expected[f"{name}_actions"])
+    with th.no_grad():
+        obs_tensor = th.as_tensor(obs)
+        indices = model.policy(obs_tensor, deterministic=True)
+        log_prob = model.policy.get_distribution(obs_tensor).log_prob(indices)
+        np.testing.assert_allclose(log_prob.numpy(), expected[f"{name}_log_prob"], rtol=1e-5)
+        if model.policy.use_baseline:
+            values = model.policy.predict_values(obs_tensor).flatten()
+            np.testing.assert_allclose(values.numpy(), expected[f"{name}_values"], rtol=1e-5)
+    # Training continues exactly as the old code did: Adam's moments went to the right parameters.
+    model.learn(30, reset_num_timesteps=False)
+    assert model.num_timesteps == int(expected[f"{name}_resumed_num_timesteps"])
+    np.testing.assert_allclose(
+        model.policy.action_net.weight.detach().numpy(), expected[f"{name}_resumed_action_net_weight"], atol=1e-6
+    )
+
+
+# ---------------------------------------------------------------------------- non-finite rewards
+class NaNRewardAt(BoxActionEnv):
+    """Rewards NaN at the ``nan_step``-th step since the env was created."""
+
+    def __init__(self, nan_step: int) -> None:
+        super().__init__()
+        self.nan_step = nan_step
+        self.steps = 0
+
+    def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict]:
+        obs, reward, terminated, truncated, info = super().step(action)
+        self.steps += 1
+        return obs, float("nan") if self.steps == self.nan_step else reward, terminated, truncated, info
+
+
+@pytest.mark.parametrize("use_baseline", [False, True])
+def test_nan_reward_refused_naming_step_and_episode(use_baseline: bool) -> None:
+    """Episodes of 5 steps, 2 per update: the 18th step is step 3 of episode 2 of the second update."""
+    kwargs: dict[str, Any] = dict(n_episodes=2, use_baseline=use_baseline, seed=0)
+    reference = REINFORCE("MlpPolicy", DummyVecEnv([BoxActionEnv]), **kwargs).learn(10)
+    model = REINFORCE("MlpPolicy", DummyVecEnv([lambda: NaNRewardAt(18)]), **kwargs)
+    with pytest.raises(ValueError, match=r"reward nan at step 3 of episode 2 \(env slot 0\) in update 2"):
+        model.learn(100)
+    # The first update was applied, the second refused: the weights are finite, those of one update.
+    assert model._n_updates == 1
+    for a, b in zip(params_of(reference), params_of(model)):
+        assert th.equal(a, b)

@@ -10,6 +10,7 @@ import torch as th
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback
 
 from sb3_es.cmaes.policies import FlatPolicy
+from sb3_es.common.checks import check_non_negative
 from sb3_es.common.population_algorithm import PopulationAlgorithm, check_positive
 from sb3_es.evaluation import PopulationEvaluator
 from sb3_es.strategies.cmaes import CMAESStrategy, Restarts
@@ -81,6 +82,7 @@ class CMAES(PopulationAlgorithm):
         _init_setup_model: bool = True,
     ) -> None:
         check_positive("sigma", sigma)
+        check_non_negative("max_restarts", max_restarts, integer=True)
         if diagonal not in (True, False, "auto"):
             raise ValueError(f"diagonal={diagonal!r}: choose True, False or 'auto'.")
         super().__init__(

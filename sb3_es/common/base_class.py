@@ -1,4 +1,5 @@
-"""What every sb3-es algorithm adds to SB3's ``BaseAlgorithm``: alias resolution, a name in the save, safe load."""
+"""What every sb3-es algorithm adds to SB3's ``BaseAlgorithm``: alias resolution, a name in the save, safe load,
+checked schedules and SB3's on-policy logging."""
 
 from __future__ import annotations
 
@@ -8,9 +9,11 @@ from typing import Any, TypeVar
 
 import torch as th
 from stable_baselines3.common.base_class import BaseAlgorithm
+from stable_baselines3.common.on_policy_algorithm import OnPolicyAlgorithm
 from stable_baselines3.common.policies import BasePolicy
-from stable_baselines3.common.type_aliases import GymEnv, Schedule
+from stable_baselines3.common.type_aliases import GymEnv, Schedule, TensorDict
 
+from sb3_es.common.checks import check_scheduled_value, check_seed
 from sb3_es.common.save_util import check_save_file
 
 SelfESBaseAlgorithm = TypeVar("SelfESBaseAlgorithm", bound="ESBaseAlgorithm")
@@ -24,9 +27,11 @@ class ESBaseAlgorithm(BaseAlgorithm):
       observations, which sb3-es policies flatten.
     - The algorithm's name is saved (``_algorithm_name``), so ``load()`` can tell a foreign or mismatched
       file apart and say which class wrote it.
-    - ``load()`` first checks the file (:func:`~sb3_es.common.save_util.check_save_file`) and raises
-      ``ValueError`` for a corrupt file or another algorithm's save; subclasses check their own state in
-      :meth:`_check_save_data`.
+    - ``load()`` and ``set_parameters(path)`` first check the file
+      (:func:`~sb3_es.common.save_util.check_save_file`) and raise ``ValueError`` for a corrupt file or
+      another algorithm's save; subclasses check their own state in :meth:`_check_save_data`.
+    - The learning-rate schedule is checked whenever the progress moves (every generation or update).
+    - ``dump_logs`` is SB3's ``OnPolicyAlgorithm.dump_logs`` (``rollout/`` and ``time/`` keys).
 
     :param policy: Policy class or alias.
     :param env: Environment, env id or VecEnv.
@@ -51,6 +56,7 @@ class ESBaseAlgorithm(BaseAlgorithm):
         device: th.device | str,
         seed: int | None,
     ) -> None:
+        check_seed(seed)
         if isinstance(policy, str):
             policy = self._get_policy_from_name(policy)
         super().__init__(
@@ -75,6 +81,48 @@ class ESBaseAlgorithm(BaseAlgorithm):
         :param path: The file, for error messages.
         :param data: The save's data dictionary.
         """
+
+    def _update_current_progress_remaining(self, num_timesteps: int, total_timesteps: int) -> None:
+        # The last generation or update may end past total_timesteps: the progress stops at 0.
+        super()._update_current_progress_remaining(min(num_timesteps, total_timesteps), total_timesteps)
+        progress = self._current_progress_remaining
+        check_scheduled_value("learning_rate", self.lr_schedule(progress), progress)
+
+    def dump_logs(self, iteration: int = 0) -> None:
+        """
+        Write the SB3 ``rollout/`` and ``time/`` keys and dump the logger (SB3's ``OnPolicyAlgorithm.dump_logs``).
+
+        :param iteration: Value of ``time/iterations`` (not logged when 0).
+        """
+        OnPolicyAlgorithm.dump_logs(self, iteration)  # type: ignore[arg-type]
+
+    def set_parameters(
+        self,
+        load_path_or_dict: str | TensorDict,
+        exact_match: bool = True,
+        device: th.device | str = "auto",
+    ) -> None:
+        """
+        Load parameters from a save of the same algorithm, or from a dict of state dicts (see ``get_parameters``).
+
+        :param load_path_or_dict: Path or file-like object of a save, or a dict of state dicts.
+        :param exact_match: Whether every parameter of the model must be given.
+        :param device: Torch device.
+        """
+        if isinstance(load_path_or_dict, dict):
+            params: dict[str, Any] = load_path_or_dict
+        else:
+            _, params = check_save_file(load_path_or_dict, type(self).__name__, method="set_parameters")
+        super().set_parameters(self._upgrade_saved_params(params), exact_match=exact_match, device=device)
+
+    def _upgrade_saved_params(self, params: dict[str, Any]) -> dict[str, Any]:
+        """
+        Turn parameters of an older save into the current layout (override where the layout changed).
+
+        :param params: Name of an object -> its state dict, as saved.
+        :return: The parameters to load.
+        """
+        return params
 
     @classmethod
     def load(  # type: ignore[override]
@@ -101,6 +149,6 @@ class ESBaseAlgorithm(BaseAlgorithm):
         :param kwargs: Attributes to override.
         :return: The loaded model.
         """
-        data = check_save_file(path, cls.__name__)
+        data, _ = check_save_file(path, cls.__name__, custom_objects)
         cls._check_save_data(path, data)
         return super().load(path, env, device, custom_objects, print_system_info, force_reset, **kwargs)

@@ -101,6 +101,12 @@ class FlatPolicy(BasePolicy):
             )
         obs_dim = flat_obs_dim(observation_space)
         is_box = isinstance(action_space, spaces.Box)
+        if isinstance(net_arch, dict):
+            raise ValueError(
+                f"net_arch={net_arch!r}: sb3-es population policies have no value network, so there is no "
+                "dict(pi=..., vf=...) to give. Pass the hidden layer sizes of the policy as a list, e.g. "
+                "net_arch=[64, 64]."
+            )
         super().__init__(observation_space, action_space, squash_output=is_box and squash_output)
         self.net_arch = [64, 64] if net_arch is None else list(net_arch)
         if any(int(n) <= 0 for n in self.net_arch):

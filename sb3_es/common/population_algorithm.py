@@ -4,8 +4,6 @@ from __future__ import annotations
 
 import io
 import pathlib
-import sys
-import time
 from abc import abstractmethod
 from typing import Any, ClassVar, TypeVar
 
@@ -14,9 +12,9 @@ import torch as th
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
-from stable_baselines3.common.utils import safe_mean
 
 from sb3_es.common.base_class import ESBaseAlgorithm
+from sb3_es.common.checks import check_positive
 from sb3_es.common.policies import FlatPolicy, LinearPolicy, MlpPolicy
 from sb3_es.evaluation import PopulationEvaluator, PopulationResult, RewardShaping, VecEnvEvaluator
 from sb3_es.strategies import Strategy
@@ -24,17 +22,7 @@ from sb3_es.strategies.noise import NoiseTablePopulation, SharedNoiseTable
 
 SelfPopulationAlgorithm = TypeVar("SelfPopulationAlgorithm", bound="PopulationAlgorithm")
 
-
-def check_positive(name: str, value: float | Schedule) -> None:
-    """
-    Raise a clear error for a non-positive hyperparameter (a schedule is checked at the start of training).
-
-    :param name: Hyperparameter name, for the message.
-    :param value: A float or a schedule ``progress_remaining -> value``.
-    """
-    start = value(1.0) if callable(value) else value
-    if not np.isfinite(start) or start <= 0:
-        raise ValueError(f"{name}={start}: it must be a positive number (got {value!r}).")
+__all__ = ["PopulationAlgorithm", "check_positive", "make_noise_table"]
 
 
 def make_noise_table(size: int | None, seed: np.random.SeedSequence) -> SharedNoiseTable | None:
@@ -264,7 +252,7 @@ class PopulationAlgorithm(ESBaseAlgorithm):
                 break
             self._n_updates += 1
             if log_interval is not None and self._n_updates % log_interval == 0:
-                self.dump_logs()
+                self.dump_logs(self._n_updates)
         callback.on_training_end()
         return self
 
@@ -322,17 +310,3 @@ class PopulationAlgorithm(ESBaseAlgorithm):
         self.logger.record("rollout/fitness_std", float(fitness.std()))
         if result.center_returns:
             self.logger.record("rollout/center_return", float(np.mean(result.center_returns)))
-
-    def dump_logs(self) -> None:
-        """Write the SB3 ``rollout/`` and ``time/`` keys and dump the logger."""
-        time_elapsed = max((time.time_ns() - self.start_time) / 1e9, sys.float_info.epsilon)
-        fps = int((self.num_timesteps - self._num_timesteps_at_start) / time_elapsed)
-        assert self.ep_info_buffer is not None
-        if len(self.ep_info_buffer) > 0:
-            self.logger.record("rollout/ep_rew_mean", safe_mean([info["r"] for info in self.ep_info_buffer]))
-            self.logger.record("rollout/ep_len_mean", safe_mean([info["l"] for info in self.ep_info_buffer]))
-        self.logger.record("time/iterations", self._n_updates, exclude="tensorboard")
-        self.logger.record("time/fps", fps)
-        self.logger.record("time/time_elapsed", int(time_elapsed), exclude="tensorboard")
-        self.logger.record("time/total_timesteps", self.num_timesteps, exclude="tensorboard")
-        self.logger.dump(step=self.num_timesteps)

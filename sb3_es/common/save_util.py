@@ -35,16 +35,23 @@ def guess_foreign_algorithm(data: dict[str, Any]) -> str:
     return "another library or algorithm"
 
 
-def check_save_file(path: str | pathlib.Path | io.BufferedIOBase, algorithm: str) -> dict[str, Any]:
+def check_save_file(
+    path: str | pathlib.Path | io.BufferedIOBase,
+    algorithm: str,
+    custom_objects: dict[str, Any] | None = None,
+    method: str = "load",
+) -> tuple[dict[str, Any], dict[str, Any]]:
     """
     Check that ``path`` is a readable sb3-es save of ``algorithm`` before SB3 loads it.
 
-    :param path: File or file-like object given to ``load()``.
+    :param path: File or file-like object given to ``load()`` or ``set_parameters()``.
     :param algorithm: Name of the class that loads it.
-    :return: The save's data dictionary.
+    :param custom_objects: Objects replacing saved ones (as in SB3's ``load``): they are not deserialized.
+    :param method: ``"load"`` or ``"set_parameters"``, for the error messages.
+    :return: The save's data dictionary and its parameters (state dicts on the CPU).
     """
     try:
-        data, params, _ = load_from_zip_file(path, device="cpu")
+        data, params, _ = load_from_zip_file(path, device="cpu", custom_objects=custom_objects)
     except (
         zipfile.BadZipFile,
         ValueError,
@@ -75,6 +82,14 @@ def check_save_file(path: str | pathlib.Path | io.BufferedIOBase, algorithm: str
             if saved_by
             else f"by {guess_foreign_algorithm(data)} (policy class {data.get('policy_class')!r})"
         )
-        hint = f" Load it with {saved_by}.load()." if saved_by else ""
-        raise ValueError(f"Cannot load {path!r} with {algorithm}.load(): it was saved {origin}.{hint}")
-    return data
+        if not saved_by:
+            hint = ""
+        elif method == "load":
+            hint = f" Load it with {saved_by}.load()."
+        else:
+            hint = (
+                f" To use its weights anyway, pass them as a dict: "
+                f"model.{method}({{'policy': {saved_by}.load(path).policy.state_dict()}})."
+            )
+        raise ValueError(f"Cannot load {path!r} with {algorithm}.{method}(): it was saved {origin}.{hint}")
+    return data, params

@@ -9,6 +9,7 @@ import torch as th
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
 from stable_baselines3.common.utils import FloatSchedule
 
+from sb3_es.common.checks import check_non_negative
 from sb3_es.common.population_algorithm import PopulationAlgorithm, check_positive, make_noise_table
 from sb3_es.evaluation import PopulationEvaluator
 from sb3_es.openes.policies import FlatPolicy
@@ -116,6 +117,11 @@ class OpenES(PopulationAlgorithm):
         for name, value in (("sigma_decay", sigma_decay), ("learning_rate_decay", learning_rate_decay)):
             if not 0 < value <= 1:
                 raise ValueError(f"{name}={value}: it must be in (0, 1].")
+        for name, value in (("sigma_limit", sigma_limit), ("learning_rate_limit", learning_rate_limit)):
+            check_non_negative(name, value)
+        check_non_negative("weight_decay", weight_decay)
+        if not 0 <= momentum < 1:
+            raise ValueError(f"momentum={momentum}: the SGD momentum must be in [0, 1).")
         super().__init__(
             policy,
             env,

@@ -9,8 +9,9 @@ from ``low`` to ``high`` (3 levels on BipedalWalker give the torques ``-1, 0, 1`
 * **factorized** (the default): an independent categorical per dimension, ``n_bins * action_dim`` logits,
   which scales to the 6 joints of dm_control's walker or the 17 of Humanoid.
 
-A native ``Discrete`` action space gets a plain categorical. ``predict()`` returns actions of the
-original env (the levels, inside the ``Box``), so the policy works like any SB3 policy.
+A native ``Discrete`` action space gets a plain categorical. The policy is SB3's ``ActorCriticPolicy``
+over the space of these indices; ``predict()`` returns actions of the original env (the levels, inside
+the ``Box``), so it works like any SB3 policy.
 """
 
 from __future__ import annotations
@@ -20,12 +21,18 @@ from typing import Any
 import numpy as np
 import torch as th
 from gymnasium import spaces
-from stable_baselines3.common.distributions import CategoricalDistribution, MultiCategoricalDistribution
-from stable_baselines3.common.policies import BasePolicy
+from stable_baselines3.common.distributions import (
+    CategoricalDistribution,
+    MultiCategoricalDistribution,
+    make_proba_distribution,
+)
+from stable_baselines3.common.policies import ActorCriticPolicy
 from stable_baselines3.common.preprocessing import get_flattened_obs_dim
-from stable_baselines3.common.torch_layers import BaseFeaturesExtractor, FlattenExtractor, create_mlp
+from stable_baselines3.common.torch_layers import BaseFeaturesExtractor, FlattenExtractor
 from stable_baselines3.common.type_aliases import PyTorchObs, Schedule
 from torch import nn
+
+from sb3_es.reinforce.legacy import upgrade_legacy_state_dict
 
 #: Default limit on the number of joint actions (``n_bins ** action_dim``).
 MAX_JOINT_ACTIONS = 100_000
@@ -58,12 +65,14 @@ class DictFlattenExtractor(BaseFeaturesExtractor):
         return th.cat([observations[key].reshape(batch_size, -1).float() for key in self.keys], dim=1)
 
 
-class DiscretizedPolicy(BasePolicy):
+class DiscretizedPolicy(ActorCriticPolicy):
     """
-    Categorical MLP policy over discretized ``Box`` actions (or native ``Discrete`` actions), with an
-    optional value network used as a baseline.
+    SB3's ``ActorCriticPolicy`` over an *index space*: a categorical MLP policy over discretized ``Box``
+    actions (or native ``Discrete`` actions), whose value network serves as an optional baseline.
 
-    The policy's distribution works on *action indices*: for a joint policy one integer in
+    The networks, the distribution (SB3's ``CategoricalDistribution`` or ``MultiCategoricalDistribution``),
+    ``get_distribution``, ``evaluate_actions`` and ``predict_values`` are SB3's; this class adds the index
+    space and the map from indices to env actions. For a joint policy an index is one integer in
     ``[0, n_bins ** action_dim)`` per observation (the last dimension varies fastest, as
     ``itertools.product``), for a factorized one an integer in ``[0, n_bins)`` per dimension.
     :meth:`indices_to_actions` turns them into env actions; ``predict()`` does it for you.
@@ -78,7 +87,8 @@ class DiscretizedPolicy(BasePolicy):
     :param max_joint_actions: Largest number of joint actions accepted when ``joint=True``.
     :param net_arch: Hidden layer sizes of the policy network (default ``[64, 64]``).
     :param activation_fn: Activation function of the hidden layers.
-    :param use_baseline: Add a separate value network (state-value baseline).
+    :param use_baseline: Train the value network as a state-value baseline. Without it the value head is
+        a single unused linear layer (``ActorCriticPolicy`` always has one) and ``predict_values`` raises.
     :param value_net_arch: Hidden layer sizes of the value network (default: ``net_arch``).
     :param ortho_init: Orthogonal initialization as in SB3's A2C/PPO (gain 0.01 on the logits, so the
         initial policy is close to uniform over the levels).
@@ -88,7 +98,8 @@ class DiscretizedPolicy(BasePolicy):
     :param features_extractor_kwargs: Keyword arguments for the features extractor.
     :param normalize_images: Whether to divide image observations by 255.
     :param optimizer_class: Optimizer class (Adam by default).
-    :param optimizer_kwargs: Keyword arguments for the optimizer, except the learning rate.
+    :param optimizer_kwargs: Keyword arguments for the optimizer, except the learning rate (default: none,
+        so Adam keeps its own ``eps``, unlike ``ActorCriticPolicy``'s ``1e-5``).
     """
 
     action_levels: th.Tensor
@@ -116,126 +127,106 @@ class DiscretizedPolicy(BasePolicy):
         check_action_space(action_space)
         if int(n_bins) != n_bins or n_bins < 2:
             raise ValueError(f"n_bins={n_bins}: it must be an integer >= 2 (levels per action dimension).")
+        if isinstance(net_arch, dict) or isinstance(value_net_arch, dict):
+            raise ValueError(
+                f"net_arch={net_arch!r}, value_net_arch={value_net_arch!r}: pass lists of hidden layer sizes, "
+                "net_arch for the policy and value_net_arch for the baseline (not dict(pi=..., vf=...))."
+            )
+        self.policy_net_arch = [64, 64] if net_arch is None else [int(n) for n in net_arch]
+        self.value_net_arch = None if value_net_arch is None else [int(n) for n in value_net_arch]
+        if any(n <= 0 for n in self.policy_net_arch + (self.value_net_arch or [])):
+            raise ValueError(f"net_arch={net_arch}, value_net_arch={value_net_arch}: layer sizes must be positive.")
+        # Set before ActorCriticPolicy.__init__, which calls _build.
+        self.n_bins = int(n_bins)
+        self.joint = bool(joint)
+        self.max_joint_actions = int(max_joint_actions)
+        self.use_baseline = bool(use_baseline)
+        self.index_space = self._make_index_space(action_space)
         if features_extractor_class is None:
-            if isinstance(observation_space, spaces.Dict):
-                features_extractor_class = DictFlattenExtractor
-            else:
-                features_extractor_class = FlattenExtractor
+            dict_obs = isinstance(observation_space, spaces.Dict)
+            features_extractor_class = DictFlattenExtractor if dict_obs else FlattenExtractor
+        value_arch = (self.value_net_arch or self.policy_net_arch) if self.use_baseline else []
         super().__init__(
             observation_space,
             action_space,
+            lr_schedule,
+            net_arch=dict(pi=self.policy_net_arch, vf=value_arch),
+            activation_fn=activation_fn,
+            ortho_init=ortho_init,
             features_extractor_class=features_extractor_class,
             features_extractor_kwargs=features_extractor_kwargs,
             normalize_images=normalize_images,
             optimizer_class=optimizer_class,
-            optimizer_kwargs=optimizer_kwargs,
-            squash_output=False,
+            optimizer_kwargs={} if optimizer_kwargs is None else optimizer_kwargs,
         )
-        self.n_bins = int(n_bins)
-        self.joint = bool(joint)
-        self.max_joint_actions = int(max_joint_actions)
-        self.net_arch = [64, 64] if net_arch is None else [int(n) for n in net_arch]
-        self.value_net_arch = None if value_net_arch is None else [int(n) for n in value_net_arch]
-        if any(n <= 0 for n in self.net_arch + (self.value_net_arch or [])):
-            raise ValueError(f"net_arch={net_arch}, value_net_arch={value_net_arch}: layer sizes must be positive.")
-        self.activation_fn = activation_fn
-        self.use_baseline = bool(use_baseline)
-        self.ortho_init = ortho_init
-
-        self.action_dist: CategoricalDistribution | MultiCategoricalDistribution
-        if isinstance(action_space, spaces.Discrete):
-            self.action_dim = 1
-            self.n_actions = int(action_space.n)
-            self.action_dist = CategoricalDistribution(self.n_actions)
-            levels = np.zeros((0, self.n_bins), dtype=np.float32)
-        else:
-            assert isinstance(action_space, spaces.Box)
-            self.action_dim = int(np.prod(action_space.shape))
+        if isinstance(action_space, spaces.Box):
             low = action_space.low.reshape(-1).astype(np.float64)
             high = action_space.high.reshape(-1).astype(np.float64)
             # linspace puts low and high exactly on the grid: actions never leave the Box.
             levels = np.linspace(low, high, self.n_bins, axis=1).astype(action_space.dtype)
-            if self.joint:
-                self.n_actions = self.n_bins**self.action_dim
-                if self.n_actions > self.max_joint_actions:
-                    raise ValueError(
-                        f"A joint categorical over {self.action_dim} action dimensions with n_bins={self.n_bins} "
-                        f"has {self.n_bins}**{self.action_dim} = {self.n_actions} actions, more than "
-                        f"max_joint_actions={self.max_joint_actions}. Use the factorized form "
-                        "(policy_kwargs=dict(joint=False)), fewer bins, or raise max_joint_actions."
-                    )
-                self.action_dist = CategoricalDistribution(self.n_actions)
-            else:
-                self.n_actions = self.n_bins * self.action_dim
-                self.action_dist = MultiCategoricalDistribution([self.n_bins] * self.action_dim)
+        else:
+            levels = np.zeros((0, self.n_bins), dtype=np.float32)
         # Level values, (action_dim, n_bins): derived from the action space, so not saved in the state dict.
         self.register_buffer("action_levels", th.as_tensor(levels), persistent=False)
         # Strides that turn a joint index into per-dimension indices (last dimension fastest).
         strides = [self.n_bins ** (self.action_dim - 1 - d) for d in range(self.action_dim)] if self.joint else []
         self.register_buffer("joint_strides", th.as_tensor(strides, dtype=th.long), persistent=False)
-        self._build(lr_schedule)
+
+    def _make_index_space(self, action_space: spaces.Space) -> spaces.Discrete | spaces.MultiDiscrete:
+        """
+        :param action_space: The env's action space.
+        :return: The space of action indices: ``Discrete`` (joint or native) or ``MultiDiscrete`` (factorized).
+        """
+        if isinstance(action_space, spaces.Discrete):
+            self.action_dim = 1
+            self.n_actions = int(action_space.n)
+            return spaces.Discrete(self.n_actions)
+        self.action_dim = int(np.prod(action_space.shape))  # type: ignore[arg-type]
+        if not self.joint:
+            self.n_actions = self.n_bins * self.action_dim
+            return spaces.MultiDiscrete([self.n_bins] * self.action_dim)
+        self.n_actions = self.n_bins**self.action_dim
+        if self.n_actions > self.max_joint_actions:
+            raise ValueError(
+                f"A joint categorical over {self.action_dim} action dimensions with n_bins={self.n_bins} "
+                f"has {self.n_bins}**{self.action_dim} = {self.n_actions} actions, more than "
+                f"max_joint_actions={self.max_joint_actions}. Use the factorized form "
+                "(policy_kwargs=dict(joint=False)), fewer bins, or raise max_joint_actions."
+            )
+        return spaces.Discrete(self.n_actions)
 
     def _build(self, lr_schedule: Schedule) -> None:
-        """
-        Create the networks and the optimizer.
-
-        :param lr_schedule: Learning rate schedule; the optimizer starts with ``lr_schedule(1)``.
-        """
-        self.features_extractor = self.make_features_extractor()
-        features_dim = self.features_extractor.features_dim
-        self.policy_net = nn.Sequential(*create_mlp(features_dim, -1, self.net_arch, self.activation_fn))
-        latent_dim = self.net_arch[-1] if self.net_arch else features_dim
-        self.action_net = self.action_dist.proba_distribution_net(latent_dim)
-        self.value_net: nn.Sequential | None = None
-        if self.use_baseline:
-            value_arch = self.net_arch if self.value_net_arch is None else self.value_net_arch
-            self.value_net = nn.Sequential(*create_mlp(features_dim, 1, value_arch, self.activation_fn))
-        if self.ortho_init:
-            self.policy_net.apply(lambda m: self.init_weights(m, gain=float(np.sqrt(2))))
-            self.action_net.apply(lambda m: self.init_weights(m, gain=0.01))
-            if self.value_net is not None:
-                self.value_net.apply(lambda m: self.init_weights(m, gain=float(np.sqrt(2))))
-                self.init_weights(self.value_net[-1], gain=1.0)
-        self.optimizer = self.optimizer_class(
-            self.parameters(),
-            lr=lr_schedule(1),  # type: ignore[call-arg]
-            **self.optimizer_kwargs,
-        )
+        # SB3 builds the action head from ``action_dist``: make it the categorical over indices.
+        self.action_dist = make_proba_distribution(self.index_space)
+        super()._build(lr_schedule)
 
     def _get_constructor_parameters(self) -> dict[str, Any]:
-        data = super()._get_constructor_parameters()
-        data.update(
-            dict(
-                lr_schedule=self._dummy_schedule,  # the algorithm rebuilds the real one when loading
-                n_bins=self.n_bins,
-                joint=self.joint,
-                max_joint_actions=self.max_joint_actions,
-                net_arch=self.net_arch,
-                activation_fn=self.activation_fn,
-                use_baseline=self.use_baseline,
-                value_net_arch=self.value_net_arch,
-                ortho_init=self.ortho_init,
-                features_extractor_class=self.features_extractor_class,
-                features_extractor_kwargs=self.features_extractor_kwargs,
-                optimizer_class=self.optimizer_class,
-                optimizer_kwargs=self.optimizer_kwargs,
-            )
+        return dict(
+            observation_space=self.observation_space,
+            action_space=self.action_space,
+            normalize_images=self.normalize_images,
+            lr_schedule=self._dummy_schedule,  # the algorithm rebuilds the real one when loading
+            n_bins=self.n_bins,
+            joint=self.joint,
+            max_joint_actions=self.max_joint_actions,
+            net_arch=self.policy_net_arch,
+            activation_fn=self.activation_fn,
+            use_baseline=self.use_baseline,
+            value_net_arch=self.value_net_arch,
+            ortho_init=self.ortho_init,
+            features_extractor_class=self.features_extractor_class,
+            features_extractor_kwargs=self.features_extractor_kwargs,
+            optimizer_class=self.optimizer_class,
+            optimizer_kwargs=self.optimizer_kwargs,
         )
-        return data
 
-    # ------------------------------------------------------------------ distribution
-    def get_distribution(self, obs: PyTorchObs) -> CategoricalDistribution | MultiCategoricalDistribution:
+    # ------------------------------------------------------------------ actions
+    def forward(  # type: ignore[override]
+        self, obs: PyTorchObs, deterministic: bool = False, generator: th.Generator | None = None
+    ) -> th.Tensor:
         """
-        :param obs: Batch of observations (tensor, or dict of tensors).
-        :return: The action distribution over indices for these observations.
-        """
-        features = self.extract_features(obs, self.features_extractor)
-        logits = self.action_net(self.policy_net(features))
-        return self.action_dist.proba_distribution(logits)
-
-    def forward(self, obs: PyTorchObs, deterministic: bool = False, generator: th.Generator | None = None) -> th.Tensor:
-        """
-        Choose action indices (use :meth:`indices_to_actions` to get env actions).
+        Choose action indices (use :meth:`indices_to_actions` to get env actions). Unlike
+        ``ActorCriticPolicy.forward`` it returns the indices only: REINFORCE needs no value while acting.
 
         :param obs: Batch of observations.
         :param deterministic: Take the mode of the distribution instead of sampling.
@@ -247,10 +238,9 @@ class DiscretizedPolicy(BasePolicy):
         if deterministic or generator is None:
             return distribution.get_actions(deterministic=deterministic)
         if isinstance(distribution, MultiCategoricalDistribution):
-            return th.stack(
-                [th.multinomial(d.probs, 1, generator=generator).squeeze(1) for d in distribution.distribution],
-                dim=1,
-            )
+            categoricals = distribution.distribution
+            return th.stack([th.multinomial(d.probs, 1, generator=generator).squeeze(1) for d in categoricals], dim=1)
+        assert isinstance(distribution, CategoricalDistribution)
         return th.multinomial(distribution.distribution.probs, 1, generator=generator).squeeze(1)
 
     def indices_to_actions(self, indices: th.Tensor) -> th.Tensor:
@@ -270,30 +260,21 @@ class DiscretizedPolicy(BasePolicy):
         return th.gather(self.action_levels.expand(per_dim.shape[0], -1, -1), 2, per_dim.unsqueeze(2)).squeeze(2)
 
     def _predict(self, observation: PyTorchObs, deterministic: bool = False) -> th.Tensor:
-        return self.indices_to_actions(self(observation, deterministic=deterministic))
-
-    def evaluate_actions(self, obs: PyTorchObs, indices: th.Tensor) -> tuple[th.Tensor, th.Tensor, th.Tensor | None]:
-        """
-        Log-probabilities and entropy of taken actions, and the baseline values.
-
-        :param obs: Batch of observations.
-        :param indices: Action indices taken in these observations.
-        :return: ``log_prob`` ``(batch,)``, ``entropy`` ``(batch,)`` and values ``(batch,)`` (``None``
-            without a baseline).
-        """
-        features = self.extract_features(obs, self.features_extractor)
-        distribution = self.action_dist.proba_distribution(self.action_net(self.policy_net(features)))
-        values = None if self.value_net is None else self.value_net(features).squeeze(1)
-        return distribution.log_prob(indices), distribution.entropy(), values
+        return self.indices_to_actions(super()._predict(observation, deterministic))
 
     def predict_values(self, obs: PyTorchObs) -> th.Tensor:
         """
         :param obs: Batch of observations.
-        :return: The baseline's state values ``(batch,)``.
+        :return: The baseline's state values ``(batch, 1)``.
         """
-        if self.value_net is None:
+        if not self.use_baseline:
             raise ValueError("This policy has no value network: create it with use_baseline=True.")
-        return self.value_net(self.extract_features(obs, self.features_extractor)).squeeze(1)
+        return super().predict_values(obs)
+
+    # ------------------------------------------------------------------ saves of sb3-es <= 0.x
+    def _load_from_state_dict(self, state_dict: dict[str, Any], prefix: str, *args: Any) -> None:
+        upgrade_legacy_state_dict(self, state_dict, prefix)
+        super()._load_from_state_dict(state_dict, prefix, *args)  # type: ignore[arg-type]
 
 
 def check_action_space(action_space: spaces.Space) -> None:

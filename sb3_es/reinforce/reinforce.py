@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import sys
-import time
 import warnings
 from dataclasses import dataclass
 from typing import Any, ClassVar, TypeVar
@@ -13,12 +11,13 @@ import torch as th
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
-from stable_baselines3.common.utils import obs_as_tensor, safe_mean
+from stable_baselines3.common.utils import obs_as_tensor
 from stable_baselines3.common.vec_env import VecEnv
 from torch.nn import functional as F
 
 from sb3_es.common.base_class import ESBaseAlgorithm
-from sb3_es.common.population_algorithm import check_positive
+from sb3_es.common.checks import check_positive
+from sb3_es.reinforce.legacy import upgrade_legacy_optimizer_state
 from sb3_es.reinforce.policies import DiscretizedPolicy, MlpPolicy, MultiInputPolicy, check_action_space
 
 SelfREINFORCE = TypeVar("SelfREINFORCE", bound="REINFORCE")
@@ -42,6 +41,29 @@ class EpisodeBatch:
     indices: np.ndarray
     returns: np.ndarray
     episode_returns: np.ndarray
+
+
+def check_rewards(rewards: np.ndarray, dones: np.ndarray, keep: np.ndarray, update: int) -> None:
+    """
+    Refuse a batch whose episodes have a non-finite reward (it would make every weight NaN).
+
+    :param rewards: Rewards ``(n_steps, n_envs)`` of the vec steps of the update.
+    :param dones: Episode ends, same shape.
+    :param keep: Which steps belong to the episodes used by the update, same shape.
+    :param update: Number of the update (1 for the first of the model), for the message.
+    """
+    bad = keep & ~np.isfinite(rewards)
+    if not bad.any():
+        return
+    t, slot = (int(k) for k in np.argwhere(bad)[0])
+    ends = np.flatnonzero(dones[:t, slot])
+    episode = len(ends) + 1
+    step = t - (int(ends[-1]) if len(ends) else -1)
+    raise ValueError(
+        f"Non-finite reward {rewards[t, slot]} at step {step} of episode {episode} (env slot {slot}) in update "
+        f"{update}, {int(bad.sum())} such reward(s) in the episodes of this update. The update was not applied: the "
+        "parameters are those of the last update. Check the environment's rewards (NaN/inf)."
+    )
 
 
 class REINFORCE(ESBaseAlgorithm):
@@ -167,6 +189,13 @@ class REINFORCE(ESBaseAlgorithm):
     def _get_torch_save_params(self) -> tuple[list[str], list[str]]:
         return ["policy", "policy.optimizer"], []
 
+    def _upgrade_saved_params(self, params: dict[str, Any]) -> dict[str, Any]:
+        # The policy renames old keys itself; the optimizer state must follow its new parameter order.
+        if "policy" in params and "policy.optimizer" in params:
+            optimizer = upgrade_legacy_optimizer_state(self.policy, params["policy"], params["policy.optimizer"])
+            params = {**params, "policy.optimizer": optimizer}
+        return params
+
     # ------------------------------------------------------------------ training
     def learn(
         self: SelfREINFORCE,
@@ -280,6 +309,7 @@ class REINFORCE(ESBaseAlgorithm):
         rewards_tn = np.stack(rew_buf)
         dones_tn = np.stack(done_buf)
         keep_tn = np.stack(keep_buf)
+        check_rewards(rewards_tn, dones_tn, keep_tn, self._n_updates + 1)
         returns_tn = np.zeros_like(rewards_tn)
         running = np.zeros(n_envs)
         for t in reversed(range(len(rew_buf))):
@@ -312,12 +342,14 @@ class REINFORCE(ESBaseAlgorithm):
         if self.normalize_returns:
             returns = (returns - returns.mean()) / (returns.std(unbiased=False) + RETURN_NORM_EPS)
 
-        log_prob, entropy, values = self.policy.evaluate_actions(obs, indices)  # type: ignore[arg-type]
-        advantages = returns if values is None else returns - values.detach()
+        values, log_prob, entropy = self.policy.evaluate_actions(obs, indices)  # type: ignore[arg-type]
+        assert entropy is not None  # categorical distributions have an exact entropy
+        values = values.flatten()
+        advantages = returns - values.detach() if self.policy.use_baseline else returns
         policy_loss = -(advantages * log_prob).mean()
         entropy_mean = entropy.mean()
         loss = policy_loss - self.ent_coef * entropy_mean
-        if values is not None:
+        if self.policy.use_baseline:
             value_loss = F.mse_loss(values, returns)
             loss = loss + value_loss
             self.logger.record("train/value_loss", value_loss.item())
@@ -335,24 +367,3 @@ class REINFORCE(ESBaseAlgorithm):
         self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
         self.logger.record("train/n_steps", len(batch.returns))
         self.logger.record("rollout/batch_ep_rew_mean", float(np.mean(batch.episode_returns)))
-
-    def dump_logs(self, iteration: int = 0) -> None:
-        """
-        Write the SB3 ``rollout/`` and ``time/`` keys and dump the logger.
-
-        :param iteration: Number of updates since the start of this ``learn()`` call.
-        """
-        assert self.ep_info_buffer is not None and self.ep_success_buffer is not None
-        time_elapsed = max((time.time_ns() - self.start_time) / 1e9, sys.float_info.epsilon)
-        fps = int((self.num_timesteps - self._num_timesteps_at_start) / time_elapsed)
-        if iteration > 0:
-            self.logger.record("time/iterations", iteration, exclude="tensorboard")
-        if len(self.ep_info_buffer) > 0:
-            self.logger.record("rollout/ep_rew_mean", safe_mean([info["r"] for info in self.ep_info_buffer]))
-            self.logger.record("rollout/ep_len_mean", safe_mean([info["l"] for info in self.ep_info_buffer]))
-        if len(self.ep_success_buffer) > 0:
-            self.logger.record("rollout/success_rate", safe_mean(self.ep_success_buffer))
-        self.logger.record("time/fps", fps)
-        self.logger.record("time/time_elapsed", int(time_elapsed), exclude="tensorboard")
-        self.logger.record("time/total_timesteps", self.num_timesteps, exclude="tensorboard")
-        self.logger.dump(step=self.num_timesteps)

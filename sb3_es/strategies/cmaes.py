@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import math
+import os
 import warnings
 from collections.abc import Iterator
 from typing import Any, Literal
@@ -27,6 +28,31 @@ def _global_randn(*shape: int) -> np.ndarray:
     :return: The samples.
     """
     return np.random.randn(*shape)
+
+
+#: pycma's full covariance needs about this many ``n x n`` float64 matrices at its peak (C, B and the
+#: eigendecomposition's work arrays; measured with pycma 4.5 on 1,500 parameters).
+FULL_COVARIANCE_MATRICES = 5
+
+
+def check_full_covariance_memory(num_params: int) -> None:
+    """
+    Refuse, before pycma allocates it, a full covariance matrix larger than this machine's memory.
+
+    :param num_params: Dimension of the search space.
+    """
+    try:
+        memory = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (AttributeError, ValueError, OSError):  # no sysconf (Windows): let pycma try
+        return
+    needed = FULL_COVARIANCE_MATRICES * 8 * num_params**2
+    if needed > memory:
+        raise MemoryError(
+            f"Full-covariance CMA-ES on {num_params} parameters needs about {needed / 2**30:,.1f} GiB "
+            f"({FULL_COVARIANCE_MATRICES} matrices of {num_params} x {num_params} float64), more than this machine's "
+            f"{memory / 2**30:,.1f} GiB. Use diagonal=True (separable CMA-ES, memory linear in the number of "
+            "parameters) or diagonal='auto', or a smaller policy."
+        )
 
 
 class CMAESStrategy(Strategy):
@@ -86,7 +112,17 @@ class CMAESStrategy(Strategy):
         self._asked: list[np.ndarray] | None = None
         self._exhausted = False
         self._np_state = np.random.RandomState(int(self.rng.integers(2**31 - 1))).get_state()
+        if not diagonal:
+            check_full_covariance_memory(self.num_params)
         self.es = self._new_es(self.center, self.sigma0, self.base_population_size)
+        if self.base_population_size < self.min_population_size:
+            raise ValueError(
+                f"population_size={self.base_population_size} is too small for CMA-ES on {self.num_params} "
+                "parameters: pycma adapts the step size with two-point adaptation (TPA, its default from "
+                f"{cma.evolution_strategy.TPA_dimension} parameters), which spends 2 candidates of every generation "
+                "on the last mean shift, and it adds a mirrored candidate. Use population_size >= "
+                f"{self.min_population_size}, or None for pycma's default ({self.default_population_size})."
+            )
 
     @contextlib.contextmanager
     def _private_random(self) -> Iterator[None]:
@@ -105,6 +141,15 @@ class CMAESStrategy(Strategy):
         options.update(self.cma_options)
         with self._private_random():
             return cma.CMAEvolutionStrategy(x0, sigma0, options)
+
+    @property
+    def min_population_size(self) -> int:
+        """
+        :return: Smallest population pycma can run with these options. It injects candidates into every
+            generation: with two-point step-size adaptation (TPA, its default from 300 parameters) 2 along the
+            last mean shift, plus a mirrored one, and they must fit in the population.
+        """
+        return 3 if self.es.mean_shift_samples else 2
 
     @property
     def population_size(self) -> int:
@@ -160,7 +205,7 @@ class CMAESStrategy(Strategy):
                 popsize, sigma0 = base * 2**self._large_restarts, self.sigma0
             else:
                 ratio = 0.5 * 2**self._large_restarts
-                popsize = max(2, int(base * ratio ** (self.rng.uniform() ** 2)))
+                popsize = max(self.min_population_size, int(base * ratio ** (self.rng.uniform() ** 2)))
                 sigma0 = self.sigma0 * 10 ** (-2 * self.rng.uniform())
         self._regime = regime
         self.es = self._new_es(self.best_params, sigma0, popsize)

@@ -1,0 +1,62 @@
+"""Clear errors for bad hyperparameters, at construction and, for schedules, at every generation."""
+
+from __future__ import annotations
+
+import numbers
+
+import numpy as np
+from stable_baselines3.common.type_aliases import Schedule
+
+
+def check_positive(name: str, value: float | Schedule) -> None:
+    """
+    Raise a clear error for a non-positive hyperparameter (a schedule is checked at the start of training).
+
+    :param name: Hyperparameter name, for the message.
+    :param value: A float or a schedule ``progress_remaining -> value``.
+    """
+    start = value(1.0) if callable(value) else value
+    if not np.isfinite(start) or start <= 0:
+        raise ValueError(f"{name}={start}: it must be a positive number (got {value!r}).")
+
+
+def check_scheduled_value(name: str, value: float, progress_remaining: float) -> None:
+    """
+    Raise a clear error when a schedule gives a negative or non-finite value during training.
+
+    :param name: Hyperparameter name, for the message.
+    :param value: The schedule's value now.
+    :param progress_remaining: SB3's progress remaining (1 to 0) at which it was evaluated.
+    """
+    if not (np.isfinite(value) and value >= 0):
+        raise ValueError(
+            f"The {name} schedule gave {value} at progress_remaining={progress_remaining:.4g}: it must stay "
+            f">= 0 for all of training (a negative {name} steps downhill). Fix the schedule, e.g. clip it: "
+            "lambda progress: max(0.0, schedule(progress))."
+        )
+
+
+def check_non_negative(name: str, value: float, integer: bool = False) -> None:
+    """
+    Raise a clear error for a negative, non-finite (or, with ``integer``, fractional) hyperparameter.
+
+    :param name: Hyperparameter name, for the message.
+    :param value: Its value.
+    :param integer: Whether it must be an integer.
+    """
+    valid = isinstance(value, numbers.Real) and np.isfinite(value) and value >= 0
+    if not valid or (integer and int(value) != value):
+        kind = "a non-negative integer" if integer else "a finite number >= 0"
+        raise ValueError(f"{name}={value!r}: it must be {kind}.")
+
+
+def check_seed(seed: int | None) -> None:
+    """
+    Raise a clear error for a seed that NumPy and torch would refuse deep inside ``set_random_seed``.
+
+    :param seed: The ``seed`` argument of an algorithm.
+    """
+    if seed is None:
+        return
+    if isinstance(seed, bool) or not isinstance(seed, numbers.Integral) or not 0 <= seed < 2**32:
+        raise ValueError(f"seed={seed!r}: it must be an integer in [0, 2**32 - 1], or None for a random seed.")
