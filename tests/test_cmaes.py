@@ -256,7 +256,7 @@ def test_private_random_state_ignores_and_preserves_the_global_one() -> None:
     drawn = np.random.rand(5)
     np.random.seed(7)
     np.testing.assert_array_equal(drawn, np.random.rand(5))
-    strategy = CMAESStrategy(np.zeros(4), seed=0)
+    strategy = CMAESStrategy(np.zeros(4), sigma=0.1, seed=0)
     np.random.seed(7)
     strategy.tell(-np.sum(strategy.ask() ** 2, axis=1))
     np.testing.assert_array_equal(drawn, np.random.rand(5))
