@@ -544,3 +544,39 @@ def test_dm_control_walker_walk() -> None:
     assert not np.array_equal(model.policy.parameters_to_vector(), initial)
     action, _ = model.predict(env.reset())
     assert action.shape == (1, 6) and np.all(np.abs(action) <= 1.0)
+
+
+# ---------------------------------------------------------------------------- ClipUp
+def test_clipup_optimizer_option() -> None:
+    """optimizer="clipup": the first step has length learning_rate along the estimated gradient."""
+    strategy = OpenESStrategy(np.array([0.5, -1.0, 2.0]), 8, sigma=0.2, learning_rate=0.05, optimizer="clipup", seed=0)
+    center = strategy.center.copy()
+    population = strategy.ask()
+    noise = (population - center) / 0.2
+    fitness = np.array([1.0, 5.0, 0.0, 2.0, 3.0, 0.5, 7.0, 1.5])
+    info = strategy.tell(fitness)
+    grad = noise.T @ centered_ranks(fitness) / (8 * 0.2)
+    np.testing.assert_allclose(strategy.center, center + 0.05 * grad / np.linalg.norm(grad), rtol=1e-10)
+    assert info["speed"] == pytest.approx(0.05)
+    model = pendulum_model(optimizer="clipup", learning_rate=0.1, max_speed=0.15)
+    assert model.strategy.optimizer.param_groups[0]["max_speed"] == 0.15
+    with pytest.raises(ValueError, match="max_speed"):
+        pendulum_model(optimizer="adam", max_speed=0.15)
+
+
+def test_learns_cartpole_with_clipup() -> None:
+    """Budget: 50,000 steps; ClipUp with learning rate max_speed / 2 (the ClipUp paper's setting)."""
+    model = OpenES(
+        "LinearPolicy", "CartPole-v1", population_size=16, sigma=0.5, optimizer="clipup", learning_rate=0.15, seed=0
+    )
+    model.learn(50_000)
+    eval_env = make_vec_env("CartPole-v1", n_envs=1, seed=123)
+    mean_return, _ = evaluate_policy(model, eval_env, n_eval_episodes=10, deterministic=True)
+    assert mean_return >= 475
+
+
+def test_schedule_and_decay_together_are_rejected() -> None:
+    with pytest.raises(ValueError, match="sigma_decay=0.9 decays a float sigma"):
+        OpenES("LinearPolicy", "Pendulum-v1", sigma=lambda progress: 0.1 * progress, sigma_decay=0.9)
+    with pytest.raises(ValueError, match="learning_rate_decay"):
+        OpenES("LinearPolicy", "Pendulum-v1", learning_rate=lambda progress: 0.1, learning_rate_decay=0.5)
