@@ -11,6 +11,7 @@ from stable_baselines3.common.evaluation import evaluate_policy
 
 from sb3_es import SimpleES
 from sb3_es.strategies import SimpleESStrategy
+from sb3_es.strategies.noise import NoiseTablePopulation, SharedNoiseTable
 from sb3_es.strategies.simple_es import elite_weights
 
 
@@ -54,6 +55,16 @@ def test_elite_weights() -> None:
     np.testing.assert_array_equal(elite_weights(1, "log"), [1.0])
     with pytest.raises(ValueError, match="weights='fitness'"):
         elite_weights(3, "fitness")  # type: ignore[arg-type]
+
+
+def test_noise_table_population() -> None:
+    strategy = SimpleESStrategy(np.ones(4), 6, sigma=0.2, noise_table=SharedNoiseTable(10_000, seed=0), seed=0)
+    population = strategy.ask()
+    assert isinstance(population, NoiseTablePopulation)
+    dense = np.asarray(population).copy()
+    np.testing.assert_array_equal(population.scales, 0.2)
+    strategy.tell(np.array([0.0, 1.0, 5.0, 2.0, 3.0, 4.0]))
+    np.testing.assert_array_equal(strategy.center, dense[2])
 
 
 # ---------------------------------------------------------------------------- learning
