@@ -13,10 +13,17 @@ from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.evaluation import evaluate_policy
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
-from sb3_es import ARS, CMAES, REINFORCE, OpenES
+from sb3_es import ARS, CMAES, PGPE, REINFORCE, OpenES, SimpleES
 
 #: Algorithms reachable from the command line, by lower-case name.
-ALGOS: dict[str, type[BaseAlgorithm]] = {"ars": ARS, "openes": OpenES, "cmaes": CMAES, "reinforce": REINFORCE}
+ALGOS: dict[str, type[BaseAlgorithm]] = {
+    "ars": ARS,
+    "openes": OpenES,
+    "cmaes": CMAES,
+    "pgpe": PGPE,
+    "simple_es": SimpleES,
+    "reinforce": REINFORCE,
+}
 
 #: The quickstart run: ARS-V2 with a linear policy on Swimmer-v5 (MuJoCo ships with the ``mujoco`` wheel),
 #: with the ARS paper's Swimmer settings; seed 959 is one of the paper's seeds.

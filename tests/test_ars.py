@@ -220,8 +220,7 @@ def test_schedules_are_applied(tmp_path: Path) -> None:
 
 def test_ars_strategy_update_rule() -> None:
     """One tell(): top-b directions by max(r+, r-), step lr / (b * std of the 2b returns used)."""
-    strategy = ARSStrategy(np.array([1.0, -1.0, 0.5]), n_delta=4, n_top=2, seed=0)
-    strategy.learning_rate, strategy.delta_std = 0.1, 0.2
+    strategy = ARSStrategy(np.array([1.0, -1.0, 0.5]), n_delta=4, n_top=2, delta_std=0.2, learning_rate=0.1, seed=0)
     center = strategy.center.copy()
     population = strategy.ask()
     deltas = (population[:4] - center) / 0.2

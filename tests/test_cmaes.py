@@ -256,7 +256,7 @@ def test_private_random_state_ignores_and_preserves_the_global_one() -> None:
     drawn = np.random.rand(5)
     np.random.seed(7)
     np.testing.assert_array_equal(drawn, np.random.rand(5))
-    strategy = CMAESStrategy(np.zeros(4), seed=0)
+    strategy = CMAESStrategy(np.zeros(4), sigma=0.1, seed=0)
     np.random.seed(7)
     strategy.tell(-np.sum(strategy.ask() ** 2, axis=1))
     np.testing.assert_array_equal(drawn, np.random.rand(5))
@@ -498,3 +498,10 @@ def test_dm_control_walker_walk() -> None:
     assert not np.array_equal(model.policy.parameters_to_vector(), initial)
     action, _ = model.predict(env.reset())
     assert action.shape == (1, 6) and np.all(np.abs(action) <= 1.0)
+
+
+def test_no_learning_rate() -> None:
+    """CMA-ES adapts its own step size: the model has no learning rate (no dummy value) and logs none."""
+    model = pendulum_model()
+    assert model.learning_rate is None
+    assert not hasattr(model.strategy, "learning_rate")

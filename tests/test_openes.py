@@ -244,7 +244,7 @@ def test_antithetic_candidates_are_mirrored_about_the_center() -> None:
         assert sigma == 0.1
         assert not np.allclose(plus, center)
     # Without mirrored sampling, the candidates are independent.
-    strategy = OpenESStrategy(np.zeros(5), population_size=6, antithetic=False, seed=0)
+    strategy = OpenESStrategy(np.zeros(5), 6, sigma=0.1, learning_rate=0.01, antithetic=False, seed=0)
     population = strategy.ask()
     assert not np.allclose(population[:3], -population[3:])
 
@@ -277,9 +277,15 @@ def test_shape_fitness_options() -> None:
 def test_strategy_update_uses_the_shaped_fitness(shaping: str) -> None:
     """Plain SGD step: center + lr * noise^T shaped / (P * sigma) (no weight decay, no momentum)."""
     strategy = OpenESStrategy(
-        np.array([0.5, -1.0, 2.0]), 8, fitness_shaping=shaping, optimizer="sgd", momentum=0.0, seed=0
+        np.array([0.5, -1.0, 2.0]),
+        8,
+        sigma=0.2,
+        learning_rate=0.3,
+        fitness_shaping=shaping,  # type: ignore[arg-type]
+        optimizer="sgd",
+        momentum=0.0,
+        seed=0,
     )
-    strategy.sigma, strategy.learning_rate = 0.2, 0.3
     center = strategy.center.copy()
     population = strategy.ask()
     noise = (population - center) / 0.2
@@ -294,8 +300,9 @@ def test_adam_and_sgd_momentum_steps() -> None:
     fitness = [np.array([1.0, 5.0, 0.0, 2.0]), np.array([3.0, -1.0, 2.0, 4.0])]
 
     def run(optimizer: str) -> tuple[list[np.ndarray], list[np.ndarray]]:
-        strategy = OpenESStrategy(np.array([0.5, -1.0]), 4, optimizer=optimizer, weight_decay=0.1, seed=0)
-        strategy.sigma, strategy.learning_rate = 0.1, 0.05
+        strategy = OpenESStrategy(
+            np.array([0.5, -1.0]), 4, sigma=0.1, learning_rate=0.05, optimizer=optimizer, weight_decay=0.1, seed=0
+        )
         centers, grads = [strategy.center.copy()], []
         for f in fitness:
             population = strategy.ask()
@@ -407,7 +414,7 @@ def test_weight_decay_with_flat_fitness(weight_decay: float) -> None:
 
 def test_best_tracking_in_the_strategy() -> None:
     for forget_best in (False, True):
-        strategy = OpenESStrategy(np.zeros(3), 4, forget_best=forget_best, seed=0)
+        strategy = OpenESStrategy(np.zeros(3), 4, sigma=0.1, learning_rate=0.01, forget_best=forget_best, seed=0)
         first = strategy.ask().copy()
         strategy.tell(np.array([1.0, 9.0, 3.0, 2.0]))
         assert strategy.best_fitness == 9.0
@@ -452,8 +459,7 @@ def test_best_tracking_in_training(tmp_path: Path, forget_best: bool) -> None:
 # ---------------------------------------------------------------------------- strategy alone
 def test_strategy_alone_maximizes_a_function() -> None:
     """Ask/tell on a pure function, no env: maximize -||x - 1||^2 from 0 in 5 dimensions."""
-    strategy = OpenESStrategy(np.zeros(5), population_size=20, seed=0)
-    strategy.sigma, strategy.learning_rate = 0.1, 0.05
+    strategy = OpenESStrategy(np.zeros(5), 20, sigma=0.1, learning_rate=0.05, seed=0)
     for _ in range(300):
         population = strategy.ask()
         strategy.tell(-np.sum((population - 1.0) ** 2, axis=1))
@@ -538,3 +544,39 @@ def test_dm_control_walker_walk() -> None:
     assert not np.array_equal(model.policy.parameters_to_vector(), initial)
     action, _ = model.predict(env.reset())
     assert action.shape == (1, 6) and np.all(np.abs(action) <= 1.0)
+
+
+# ---------------------------------------------------------------------------- ClipUp
+def test_clipup_optimizer_option() -> None:
+    """optimizer="clipup": the first step has length learning_rate along the estimated gradient."""
+    strategy = OpenESStrategy(np.array([0.5, -1.0, 2.0]), 8, sigma=0.2, learning_rate=0.05, optimizer="clipup", seed=0)
+    center = strategy.center.copy()
+    population = strategy.ask()
+    noise = (population - center) / 0.2
+    fitness = np.array([1.0, 5.0, 0.0, 2.0, 3.0, 0.5, 7.0, 1.5])
+    info = strategy.tell(fitness)
+    grad = noise.T @ centered_ranks(fitness) / (8 * 0.2)
+    np.testing.assert_allclose(strategy.center, center + 0.05 * grad / np.linalg.norm(grad), rtol=1e-10)
+    assert info["speed"] == pytest.approx(0.05)
+    model = pendulum_model(optimizer="clipup", learning_rate=0.1, max_speed=0.15)
+    assert model.strategy.optimizer.param_groups[0]["max_speed"] == 0.15
+    with pytest.raises(ValueError, match="max_speed"):
+        pendulum_model(optimizer="adam", max_speed=0.15)
+
+
+def test_learns_cartpole_with_clipup() -> None:
+    """Budget: 50,000 steps; ClipUp with learning rate max_speed / 2 (the ClipUp paper's setting)."""
+    model = OpenES(
+        "LinearPolicy", "CartPole-v1", population_size=16, sigma=0.5, optimizer="clipup", learning_rate=0.15, seed=0
+    )
+    model.learn(50_000)
+    eval_env = make_vec_env("CartPole-v1", n_envs=1, seed=123)
+    mean_return, _ = evaluate_policy(model, eval_env, n_eval_episodes=10, deterministic=True)
+    assert mean_return >= 475
+
+
+def test_schedule_and_decay_together_are_rejected() -> None:
+    with pytest.raises(ValueError, match="sigma_decay=0.9 decays a float sigma"):
+        OpenES("LinearPolicy", "Pendulum-v1", sigma=lambda progress: 0.1 * progress, sigma_decay=0.9)
+    with pytest.raises(ValueError, match="learning_rate_decay"):
+        OpenES("LinearPolicy", "Pendulum-v1", learning_rate=lambda progress: 0.1, learning_rate_decay=0.5)

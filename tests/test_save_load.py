@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 from stable_baselines3 import PPO
 from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.save_util import load_from_zip_file
 from stable_baselines3.common.vec_env import DummyVecEnv
 
 from sb3_es import ARS
@@ -281,3 +282,42 @@ def test_load_ars_save_with_another_sb3_es_algorithm(tmp_path: Path, other: str)
     trained_model().save(tmp_path / "ars.zip")
     with pytest.raises(ValueError, match=r"saved by sb3-es ARS.*ARS\.load\(\)"):
         getattr(sb3_es, other).load(tmp_path / "ars.zip")
+
+
+# ---------------------------------------------------------------------------- files from older versions
+LEGACY_DIR = Path(__file__).resolve().parent / "data" / "legacy"
+
+
+@pytest.mark.parametrize("name", ["ars", "openes", "cmaes"])
+def test_files_saved_before_strategy_state_version_2_load_and_continue(name: str) -> None:
+    """Saves written at fcb4e90 (the algorithm then set and decayed the strategy's step sizes every generation).
+
+    They load, the strategy gets the hyperparameters the algorithm had (OpenES: sigma 0.1 x 0.8 and learning
+    rate 0.05 x 0.9 after the one saved generation), and one more generation continues the run that the old
+    code ran on (tests/data/legacy/make_legacy.py).
+    """
+    import sb3_es
+
+    algo = {"ars": sb3_es.ARS, "openes": sb3_es.OpenES, "cmaes": sb3_es.CMAES}[name]
+    data, _, _ = load_from_zip_file(LEGACY_DIR / f"{name}.zip")
+    assert data is not None and data["strategy"].restored_legacy_state
+    model = algo.load(LEGACY_DIR / f"{name}.zip", env=pendulum_env())
+    assert not model.strategy.restored_legacy_state  # upgraded on load
+    assert model.strategy.best_fitness == -np.inf or np.isfinite(model.strategy.best_fitness)
+    if name == "openes":
+        assert model.strategy.sigma == pytest.approx(0.08)
+        assert model.strategy.learning_rate == pytest.approx(0.045)
+        assert (model.strategy.sigma_decay, model.strategy.learning_rate_decay) == (0.8, 0.9)
+    if name == "ars":
+        assert (model.strategy.delta_std, model.strategy.learning_rate) == (0.05, 0.02)
+    model.learn(1, reset_num_timesteps=False)
+    assert model._n_updates == 2
+    np.testing.assert_allclose(
+        model.policy.parameters_to_vector(), np.load(LEGACY_DIR / f"{name}_next.npy"), rtol=1e-6, atol=1e-9
+    )
+    # It saves again in today's format.
+    buffer = io.BytesIO()
+    model.save(buffer)
+    buffer.seek(0)
+    data, _, _ = load_from_zip_file(buffer)
+    assert data is not None and data["strategy"].state_version == 2

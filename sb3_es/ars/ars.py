@@ -8,13 +8,16 @@ import numpy as np
 import torch as th
 from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
-from stable_baselines3.common.utils import FloatSchedule
 
 from sb3_es.ars.policies import FlatPolicy, LinearPolicy, MlpPolicy
-from sb3_es.common.population_algorithm import PopulationAlgorithm, check_positive, make_noise_table
+from sb3_es.common.population_algorithm import (
+    PopulationAlgorithm,
+    check_positive,
+    initial_value,
+    make_noise_table,
+)
 from sb3_es.evaluation import PopulationEvaluator
 from sb3_es.strategies import ARSStrategy
-from sb3_es.strategies.noise import NoiseTablePopulation
 
 SelfARS = TypeVar("SelfARS", bound="ARS")
 
@@ -60,6 +63,7 @@ class ARS(PopulationAlgorithm):
         "MultiInputPolicy": MlpPolicy,
     }
     strategy: ARSStrategy
+    scheduled_hyperparameters = ("learning_rate", "delta_std")
 
     def __init__(
         self,
@@ -110,7 +114,6 @@ class ARS(PopulationAlgorithm):
         self.n_delta = int(n_delta)
         self.n_top = int(n_top)
         self.delta_std = delta_std
-        self.delta_std_schedule = FloatSchedule(delta_std)
         if noise_table_size is not None and int(noise_table_size) < 1:
             raise ValueError(f"noise_table_size={noise_table_size}: use a positive size or None.")
         self.noise_table_size = noise_table_size
@@ -118,15 +121,15 @@ class ARS(PopulationAlgorithm):
             self._setup_model()
 
     def _make_strategy(self, center: np.ndarray, seed: np.random.SeedSequence) -> ARSStrategy:
-        table = make_noise_table(self.noise_table_size, seed)
-        return ARSStrategy(center, self.n_delta, self.n_top, seed=seed, noise_table=table)  # type: ignore[arg-type]
-
-    def _ask(self) -> np.ndarray | NoiseTablePopulation:
-        progress = self._current_progress_remaining
-        self.strategy.delta_std = float(self.delta_std_schedule(progress))
-        self.strategy.learning_rate = float(self.lr_schedule(progress))
-        check_positive("delta_std", self.strategy.delta_std)
-        return self.strategy.ask()
+        return ARSStrategy(
+            center,
+            self.n_delta,
+            self.n_top,
+            delta_std=initial_value(self.delta_std),
+            learning_rate=initial_value(self.learning_rate),
+            seed=seed,
+            noise_table=make_noise_table(self.noise_table_size, seed),
+        )
 
     def learn(
         self: SelfARS,

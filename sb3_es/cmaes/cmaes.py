@@ -88,7 +88,6 @@ class CMAES(PopulationAlgorithm):
         super().__init__(
             policy,
             env,
-            learning_rate=1.0,  # unused: CMA-ES adapts its own step size
             n_eval_episodes=n_eval_episodes,
             alive_bonus_offset=alive_bonus_offset,
             reward_clip=reward_clip,

@@ -35,7 +35,7 @@ class ESBaseAlgorithm(BaseAlgorithm):
 
     :param policy: Policy class or alias.
     :param env: Environment, env id or VecEnv.
-    :param learning_rate: Learning rate or schedule.
+    :param learning_rate: Learning rate or schedule (``None`` for algorithms without one).
     :param policy_kwargs: Keyword arguments for the policy.
     :param stats_window_size: Episodes averaged in ``rollout/ep_rew_mean``.
     :param tensorboard_log: TensorBoard log directory.
@@ -48,7 +48,7 @@ class ESBaseAlgorithm(BaseAlgorithm):
         self,
         policy: str | type[BasePolicy],
         env: GymEnv | str | None,
-        learning_rate: float | Schedule,
+        learning_rate: float | Schedule | None,
         policy_kwargs: dict[str, Any] | None,
         stats_window_size: int,
         tensorboard_log: str | None,
@@ -62,7 +62,7 @@ class ESBaseAlgorithm(BaseAlgorithm):
         super().__init__(
             policy,
             env,
-            learning_rate=learning_rate,
+            learning_rate=learning_rate,  # type: ignore[arg-type]  # None: the algorithm has no learning rate
             policy_kwargs=policy_kwargs,
             stats_window_size=stats_window_size,
             tensorboard_log=tensorboard_log,

@@ -18,11 +18,20 @@ from sb3_es.common.checks import check_positive
 from sb3_es.common.policies import FlatPolicy, LinearPolicy, MlpPolicy
 from sb3_es.evaluation import PopulationEvaluator, PopulationResult, RewardShaping, VecEnvEvaluator
 from sb3_es.strategies import Strategy
-from sb3_es.strategies.noise import NoiseTablePopulation, SharedNoiseTable
+from sb3_es.strategies.base import Population
+from sb3_es.strategies.noise import SharedNoiseTable
 
 SelfPopulationAlgorithm = TypeVar("SelfPopulationAlgorithm", bound="PopulationAlgorithm")
 
 __all__ = ["PopulationAlgorithm", "check_positive", "make_noise_table"]
+
+
+def initial_value(value: float | Schedule) -> float:
+    """
+    :param value: A float or a schedule ``progress_remaining -> value``.
+    :return: The value at the start of training (a strategy is built with it; a schedule then takes over).
+    """
+    return float(value(1.0) if callable(value) else value)
 
 
 def make_noise_table(size: int | None, seed: np.random.SeedSequence) -> SharedNoiseTable | None:
@@ -40,9 +49,11 @@ def make_noise_table(size: int | None, seed: np.random.SeedSequence) -> SharedNo
 
 class PopulationAlgorithm(ESBaseAlgorithm):
     """
-    Base class of the population methods (ARS, OpenES, CMA-ES): an algorithm is mostly its strategy.
+    Base class of the population methods (ARS, OpenES, CMA-ES, PGPE, SimpleES): an algorithm is mostly its
+    strategy.
 
-    Each generation: the strategy proposes candidates (``_ask``), the evaluator runs them on the
+    Each generation: scheduled hyperparameters are written into the strategy (``scheduled_hyperparameters``),
+    the strategy proposes candidates (``ask``), the evaluator runs them on the
     environment (one batched forward pass per vec step, SB3 callbacks once per vec step), their
     fitness goes back to the strategy (``tell``), the observation statistics are updated, and the
     policy takes the strategy's new center.
@@ -55,7 +66,8 @@ class PopulationAlgorithm(ESBaseAlgorithm):
 
     :param policy: Policy class or alias (``"MlpPolicy"``, ``"LinearPolicy"``).
     :param env: Environment, env id, or VecEnv. Every env slot evaluates a different candidate.
-    :param learning_rate: Step size (float or schedule); its meaning depends on the algorithm.
+    :param learning_rate: Step size (float or schedule) of the algorithms that have one (``None`` for those,
+        like CMA-ES, that adapt their own); its meaning depends on the algorithm.
     :param n_eval_episodes: Episodes per candidate.
     :param alive_bonus_offset: Added to the fitness once per step, to cancel alive bonuses.
     :param reward_clip: ``(low, high)``: clip each step's reward to this range in the fitness (``None``: no clipping).
@@ -78,6 +90,11 @@ class PopulationAlgorithm(ESBaseAlgorithm):
     """
 
     policy: FlatPolicy
+    #: Hyperparameters that may be SB3 schedules: each names an attribute of the algorithm (a float or a
+    #: schedule ``progress_remaining -> value``) and the strategy attribute of the same name. The strategy is
+    #: built with the starting value; a schedule is then evaluated, checked and written into the strategy at
+    #: the start of every generation (the one place where anything outside a strategy changes it).
+    scheduled_hyperparameters: ClassVar[tuple[str, ...]] = ()
     policy_aliases: ClassVar[dict[str, type[BasePolicy]]] = {
         "MlpPolicy": MlpPolicy,
         "LinearPolicy": LinearPolicy,
@@ -88,7 +105,7 @@ class PopulationAlgorithm(ESBaseAlgorithm):
         self,
         policy: str | type[FlatPolicy],
         env: GymEnv | str | None,
-        learning_rate: float | Schedule,
+        learning_rate: float | Schedule | None = None,
         n_eval_episodes: int = 1,
         alive_bonus_offset: float = 0.0,
         zero_policy: bool = True,
@@ -110,7 +127,8 @@ class PopulationAlgorithm(ESBaseAlgorithm):
         )
         if int(n_eval_episodes) != n_eval_episodes or n_eval_episodes < 1:
             raise ValueError(f"n_eval_episodes={n_eval_episodes}: it must be a positive integer.")
-        check_positive("learning_rate", learning_rate)
+        if learning_rate is not None:
+            check_positive("learning_rate", learning_rate)
         self.n_eval_episodes = int(n_eval_episodes)
         self.alive_bonus_offset = float(alive_bonus_offset)
         shaping = RewardShaping.create(reward_clip, terminal_reward, self.alive_bonus_offset)
@@ -132,7 +150,6 @@ class PopulationAlgorithm(ESBaseAlgorithm):
 
     # ------------------------------------------------------------------ model
     def _setup_model(self) -> None:
-        self._setup_lr_schedule()
         self.set_random_seed(self.seed)
         policy = self.policy_class(self.observation_space, self.action_space, **self.policy_kwargs)
         if not isinstance(policy, FlatPolicy):
@@ -145,6 +162,9 @@ class PopulationAlgorithm(ESBaseAlgorithm):
                 center[self.policy.output_layer_slice()] = 0.0
             self.strategy = self._make_strategy(center, strategy_seed)
             self._env_rng = np.random.default_rng(env_seed)
+        elif self.strategy.restored_legacy_state:
+            self._upgrade_legacy_strategy()
+            self.strategy.state_version = self.strategy.STATE_VERSION
         self.policy.load_from_vector(self.strategy.center)
 
     @abstractmethod
@@ -157,14 +177,39 @@ class PopulationAlgorithm(ESBaseAlgorithm):
         :return: The strategy.
         """
 
-    def _ask(self) -> np.ndarray | NoiseTablePopulation:
+    def _upgrade_legacy_strategy(self) -> None:
         """
-        Set schedule-driven hyperparameters on the strategy, then ask it for candidates.
+        A strategy saved before version 2 had hyperparameters that the algorithm overwrote every generation:
+        give it the algorithm's values (a schedule is applied at the next generation anyway).
+        """
+        for name in self.scheduled_hyperparameters:
+            value = getattr(self, name)
+            if not callable(value):
+                setattr(self.strategy, name, float(value))
+
+    def _ask(self) -> Population:
+        """
+        Write this generation's value of every scheduled hyperparameter into the strategy, then ask it.
 
         :return: The candidates ``(population_size, num_params)``.
         """
         assert self.strategy is not None
+        for name in self.scheduled_hyperparameters:
+            schedule = getattr(self, name)
+            if callable(schedule):
+                value = float(schedule(self._current_progress_remaining))
+                check_positive(name, value)
+                setattr(self.strategy, name, value)
         return self.strategy.ask()
+
+    @property
+    def best_params(self) -> np.ndarray:
+        """
+        :return: Parameters of the best candidate seen (with ``forget_best``, of the latest generation); its
+            fitness is ``strategy.best_fitness``. Load them with ``policy.load_from_vector``.
+        """
+        assert self.strategy is not None
+        return self.strategy.best_params
 
     @property
     def reward_shaping(self) -> RewardShaping:

@@ -2,61 +2,51 @@
 
 from __future__ import annotations
 
-from typing import Any, Literal, TypeVar
+from typing import Any, TypeVar
 
 import numpy as np
 import torch as th
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
-from stable_baselines3.common.utils import FloatSchedule
 
 from sb3_es.common.checks import check_non_negative
-from sb3_es.common.population_algorithm import PopulationAlgorithm, check_positive, make_noise_table
+from sb3_es.common.population_algorithm import (
+    PopulationAlgorithm,
+    check_positive,
+    initial_value,
+    make_noise_table,
+)
 from sb3_es.evaluation import PopulationEvaluator
 from sb3_es.openes.policies import FlatPolicy
-from sb3_es.strategies.noise import NoiseTablePopulation
 from sb3_es.strategies.openes import FitnessShaping, OpenESStrategy
+from sb3_es.strategies.optimizers import OptimizerName
 
 SelfOpenES = TypeVar("SelfOpenES", bound="OpenES")
-
-
-def decayed(base: float | Schedule, progress: float, generation: int, decay: float, floor: float) -> float:
-    """
-    Value of a hyperparameter that is a schedule, or a float decayed geometrically to a floor (estool style).
-
-    :param base: Float or SB3 schedule ``progress_remaining -> value``.
-    :param progress: SB3 progress remaining (1 to 0).
-    :param generation: Number of updates done.
-    :param decay: Multiplicative decay per generation (floats only).
-    :param floor: Lower bound of the decayed value (floats only).
-    :return: The value for this generation.
-    """
-    if callable(base):
-        return float(base(progress))
-    # The floor bounds the decay; it never raises a value that starts below it.
-    return max(min(floor, float(base)), float(base) * decay**generation)
 
 
 class OpenES(PopulationAlgorithm):
     """
     OpenAI-ES (https://arxiv.org/abs/1703.03864), with estool's extensions: mirrored sampling,
-    centered-rank fitness shaping, weight decay, Adam or SGD on the mean, decaying noise and step
+    centered-rank fitness shaping, weight decay, Adam, SGD or ClipUp on the mean, decaying noise and step
     size, and tracking of the best candidate.
 
     :param policy: ``"MlpPolicy"``, ``"LinearPolicy"`` or a :class:`~sb3_es.common.policies.FlatPolicy` class.
     :param env: Environment, env id or VecEnv; each env slot evaluates a different candidate.
     :param population_size: Candidates per generation (even with ``antithetic``).
     :param sigma: Noise standard deviation: a float (decayed by ``sigma_decay`` down to ``sigma_limit``)
-        or an SB3 schedule.
+        or an SB3 schedule (then ``sigma_decay`` must be 1: the schedule sets every generation's value).
     :param learning_rate: Optimizer step size: a float (decayed by ``learning_rate_decay`` down to
-        ``learning_rate_limit``) or an SB3 schedule.
-    :param sigma_decay: Multiplicative decay of ``sigma`` per generation (1 = constant).
+        ``learning_rate_limit``) or an SB3 schedule (then ``learning_rate_decay`` must be 1). With
+        ``optimizer="clipup"`` it is the length of one normalized step (ClipUp's paper: ``max_speed / 2``).
+    :param sigma_decay: Multiplicative decay of a float ``sigma`` per generation (1 = constant).
     :param sigma_limit: Floor of the decayed ``sigma``.
-    :param learning_rate_decay: Multiplicative decay of the learning rate per generation.
+    :param learning_rate_decay: Multiplicative decay of a float learning rate per generation.
     :param learning_rate_limit: Floor of the decayed learning rate.
     :param antithetic: Mirrored sampling.
     :param fitness_shaping: ``"centered_rank"`` (estool's ``rank_fitness=True``), ``"zscore"`` or ``"raw"``.
-    :param optimizer: ``"adam"`` or ``"sgd"``.
-    :param momentum: SGD momentum.
+    :param optimizer: ``"adam"``, ``"sgd"`` or ``"clipup"`` (Toklu et al., 2020; see
+        :class:`~sb3_es.strategies.optimizers.ClipUp`).
+    :param momentum: SGD's and ClipUp's momentum.
+    :param max_speed: ClipUp's largest step (``None``: twice the initial learning rate); ClipUp only.
     :param weight_decay: L2 coefficient on the mean.
     :param forget_best: Track only the latest generation's best candidate.
     :param zero_policy: Start with the output layer at zero (hidden layers keep their random initialization; a
@@ -80,6 +70,8 @@ class OpenES(PopulationAlgorithm):
     """
 
     strategy: OpenESStrategy
+    scheduled_hyperparameters = ("learning_rate", "sigma")
+    max_speed: float | None = None  # class default for files saved before ClipUp existed
 
     def __init__(
         self,
@@ -94,8 +86,9 @@ class OpenES(PopulationAlgorithm):
         learning_rate_limit: float = 0.001,
         antithetic: bool = True,
         fitness_shaping: FitnessShaping = "centered_rank",
-        optimizer: Literal["adam", "sgd"] = "adam",
+        optimizer: OptimizerName = "adam",
         momentum: float = 0.9,
+        max_speed: float | None = None,
         weight_decay: float = 0.005,
         forget_best: bool = False,
         zero_policy: bool = False,
@@ -114,14 +107,22 @@ class OpenES(PopulationAlgorithm):
         _init_setup_model: bool = True,
     ) -> None:
         check_positive("sigma", sigma)
-        for name, value in (("sigma_decay", sigma_decay), ("learning_rate_decay", learning_rate_decay)):
-            if not 0 < value <= 1:
-                raise ValueError(f"{name}={value}: it must be in (0, 1].")
-        for name, value in (("sigma_limit", sigma_limit), ("learning_rate_limit", learning_rate_limit)):
-            check_non_negative(name, value)
+        for name, limit in (("sigma_limit", sigma_limit), ("learning_rate_limit", learning_rate_limit)):
+            check_non_negative(name, limit)
         check_non_negative("weight_decay", weight_decay)
         if not 0 <= momentum < 1:
             raise ValueError(f"momentum={momentum}: the SGD momentum must be in [0, 1).")
+        for name, value, rate in (
+            ("sigma", sigma, sigma_decay),
+            ("learning_rate", learning_rate, learning_rate_decay),
+        ):
+            if not 0 < rate <= 1:
+                raise ValueError(f"{name}_decay={rate}: it must be in (0, 1].")
+            if callable(value) and rate != 1:
+                raise ValueError(
+                    f"{name}_decay={rate} decays a float {name}, but {name} is a schedule, which sets every "
+                    f"generation's value itself: put the decay into the schedule, or pass a float {name}."
+                )
         super().__init__(
             policy,
             env,
@@ -149,6 +150,7 @@ class OpenES(PopulationAlgorithm):
         self.fitness_shaping: FitnessShaping = fitness_shaping
         self.optimizer = optimizer
         self.momentum = momentum
+        self.max_speed = max_speed
         self.weight_decay = weight_decay
         self.forget_best = forget_best
         if noise_table_size is not None and int(noise_table_size) < 1:
@@ -161,33 +163,35 @@ class OpenES(PopulationAlgorithm):
         return OpenESStrategy(
             center,
             self.population_size,
+            sigma=initial_value(self.sigma),
+            learning_rate=initial_value(self.learning_rate),
             antithetic=self.antithetic,
             fitness_shaping=self.fitness_shaping,
             optimizer=self.optimizer,
             momentum=self.momentum,
+            max_speed=self.max_speed,
             weight_decay=self.weight_decay,
             forget_best=self.forget_best,
+            sigma_decay=self.sigma_decay,
+            sigma_limit=self.sigma_limit,
+            learning_rate_decay=self.learning_rate_decay,
+            learning_rate_limit=self.learning_rate_limit,
             seed=seed,
             noise_table=make_noise_table(self.noise_table_size, seed),
         )
 
-    def _ask(self) -> np.ndarray | NoiseTablePopulation:
-        progress, generation = self._current_progress_remaining, self._n_updates
-        self.strategy.sigma = decayed(self.sigma, progress, generation, self.sigma_decay, self.sigma_limit)
-        self.strategy.learning_rate = decayed(
-            FloatSchedule(self.learning_rate) if callable(self.learning_rate) else self.learning_rate,
-            progress,
-            generation,
-            self.learning_rate_decay,
-            self.learning_rate_limit,
-        )
-        check_positive("sigma", self.strategy.sigma)
-        return self.strategy.ask()
-
-    @property
-    def best_params(self) -> np.ndarray:
-        """:return: Parameters of the best candidate seen (load them with ``policy.load_from_vector``)."""
-        return self.strategy.best_params
+    def _upgrade_legacy_strategy(self) -> None:
+        # Before version 2 this class decayed sigma and the learning rate (closed form in the generation count).
+        strategy, generation = self.strategy, self._n_updates
+        for name, rate, limit in (
+            ("sigma", self.sigma_decay, self.sigma_limit),
+            ("learning_rate", self.learning_rate_decay, self.learning_rate_limit),
+        ):
+            setattr(strategy, f"{name}_decay", rate)
+            setattr(strategy, f"{name}_limit", limit)
+            base = getattr(self, name)
+            if not callable(base):
+                setattr(strategy, name, max(min(limit, float(base)), float(base) * rate**generation))
 
     def learn(
         self: SelfOpenES,

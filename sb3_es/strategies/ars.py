@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from sb3_es.strategies.base import Strategy, check_fitness
+from sb3_es.strategies.base import Population, Strategy
 from sb3_es.strategies.noise import NoiseTablePopulation, SharedNoiseTable
 
 
@@ -18,6 +18,8 @@ class ARSStrategy(Strategy):
     :param center: Initial parameters.
     :param n_delta: Number of random directions per generation.
     :param n_top: Number of best directions used in the update (``b`` in the paper).
+    :param delta_std: Exploration noise ``nu``.
+    :param learning_rate: Step size ``alpha``.
     :param seed: Seed of the random generator.
     :param noise_table: Read the directions from this shared table (``ask()`` then returns a
         :class:`~sb3_es.strategies.noise.NoiseTablePopulation`, which Ray ships as offsets) instead of
@@ -29,7 +31,10 @@ class ARSStrategy(Strategy):
         center: np.ndarray,
         n_delta: int,
         n_top: int,
-        seed: int | None = None,
+        *,
+        delta_std: float,
+        learning_rate: float,
+        seed: int | np.random.SeedSequence | None = None,
         noise_table: SharedNoiseTable | None = None,
     ) -> None:
         super().__init__(center, seed)
@@ -40,8 +45,11 @@ class ARSStrategy(Strategy):
             raise ValueError(f"n_top={n_top} must be between 1 and n_delta={n_delta}.")
         self.n_delta = n_delta
         self.n_top = n_top
-        self.delta_std = 0.05
-        self.learning_rate = 0.02
+        for name, value in (("delta_std", delta_std), ("learning_rate", learning_rate)):
+            if not (np.isfinite(value) and value > 0):
+                raise ValueError(f"{name}={value}: it must be a positive number.")
+        self.delta_std = float(delta_std)
+        self.learning_rate = float(learning_rate)
         self._deltas: np.ndarray | None = None
 
     @property
@@ -49,7 +57,7 @@ class ARSStrategy(Strategy):
         """:return: ``2 * n_delta``."""
         return 2 * self.n_delta
 
-    def ask(self) -> np.ndarray | NoiseTablePopulation:
+    def _ask(self) -> Population:
         if self.noise_table is not None:
             offsets = self.noise_table.sample_offsets(self.rng, self.num_params, self.n_delta)
             self._deltas = np.stack([self.noise_table.get(o, self.num_params) for o in offsets]).astype(np.float64)
@@ -59,10 +67,8 @@ class ARSStrategy(Strategy):
         scaled = self.delta_std * self._deltas
         return np.concatenate([self.center + scaled, self.center - scaled])
 
-    def tell(self, fitness: np.ndarray) -> dict[str, float]:
-        if self._deltas is None:
-            raise RuntimeError("tell() called before ask().")
-        fitness = check_fitness(fitness, self.population_size)
+    def _tell(self, fitness: np.ndarray) -> dict[str, float]:
+        assert self._deltas is not None
         plus, minus = fitness[: self.n_delta], fitness[self.n_delta :]
         # Directions ranked by max(r+, r-); ties keep the sampling order (stable sort).
         top = np.argsort(-np.maximum(plus, minus), kind="stable")[: self.n_top]

@@ -3,10 +3,14 @@
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from typing import Any
 
 import numpy as np
 
+from sb3_es.strategies.fitness import FitnessShaping, shape_fitness
 from sb3_es.strategies.noise import NoiseTablePopulation
+
+Population = np.ndarray | NoiseTablePopulation
 
 
 class Strategy(ABC):
@@ -14,36 +18,77 @@ class Strategy(ABC):
     A search distribution over flat parameter vectors, driven by ``ask`` and ``tell``.
 
     ``ask()`` returns the candidates of a generation, ``tell(fitness)`` moves the distribution using
-    their fitness (higher is better). The strategy owns its random generator, so pickling it (as
-    ``save()`` does) stores everything needed to continue exactly.
+    their fitness (higher is better). As evosax's ``tell`` does, the steps every strategy shares happen
+    here, once: the fitness is checked, the best candidate is tracked (``best_params``, ``best_fitness``;
+    with ``forget_best``, the best of the latest generation), the fitness is shaped (``fitness_shaping``),
+    and only then does the strategy's own update (``_tell``) run. A strategy's hyperparameters are
+    constructor arguments and attributes; nothing outside the strategy changes them, except an SB3
+    schedule that the algorithm evaluates before each generation.
+
+    The strategy owns its random generator, so pickling it (as ``save()`` does) stores everything needed to
+    continue exactly.
 
     :param center: Initial center (mean) of the search distribution.
     :param seed: Seed of the strategy's random generator.
     """
 
-    def __init__(self, center: np.ndarray, seed: int | None = None) -> None:
+    #: Fitness shaping applied before ``_tell`` (see :func:`~sb3_es.strategies.fitness.shape_fitness`).
+    fitness_shaping: FitnessShaping = "raw"
+    #: Track only the latest generation's best candidate.
+    forget_best: bool = False
+    #: Version of the pickled state: files from before version 2 are upgraded on load (see ``__setstate__``).
+    STATE_VERSION = 2
+
+    def __init__(self, center: np.ndarray, seed: int | np.random.SeedSequence | None = None) -> None:
         self.center = np.asarray(center, dtype=np.float64).copy()
         self.rng = np.random.default_rng(seed)
+        self.best_params = self.center.copy()
+        self.best_fitness = -np.inf
+        self.state_version = self.STATE_VERSION
+        self._asked: Population | None = None
 
     @property
     def num_params(self) -> int:
         """:return: Dimension of the search space."""
         return int(self.center.shape[0])
 
-    @abstractmethod
-    def ask(self) -> np.ndarray | NoiseTablePopulation:
+    def ask(self) -> Population:
         """
         :return: The candidates to evaluate, ``(population_size, num_params)``: an array, or a
             :class:`~sb3_es.strategies.noise.NoiseTablePopulation` that behaves as one.
         """
+        self._asked = self._ask()
+        return self._asked
 
-    @abstractmethod
     def tell(self, fitness: np.ndarray) -> dict[str, float]:
         """
         Update the distribution from the fitness of the candidates of the last ``ask()``.
 
         :param fitness: One value per candidate, higher is better, all finite.
-        :return: Scalars worth logging (logged under ``train/``).
+        :return: Scalars worth logging (logged under ``train/``), ``best_fitness`` included.
+        """
+        if self._asked is None:
+            raise RuntimeError("tell() called before ask().")
+        fitness = check_fitness(fitness, len(self._asked))
+        best = int(np.argmax(fitness))
+        if self.forget_best or fitness[best] > self.best_fitness:
+            self.best_fitness = float(fitness[best])
+            self.best_params = candidate(self._asked, best)
+        stats = self._tell(shape_fitness(fitness, self.fitness_shaping))
+        self._asked = None
+        return {**stats, "best_fitness": self.best_fitness}
+
+    @abstractmethod
+    def _ask(self) -> Population:
+        """:return: The candidates of a new generation."""
+
+    @abstractmethod
+    def _tell(self, fitness: np.ndarray) -> dict[str, float]:
+        """
+        The strategy's own update, from the checked and shaped fitness of the candidates just asked.
+
+        :param fitness: Shaped fitness, one value per candidate.
+        :return: Scalars worth logging.
         """
 
     def set_center(self, center: np.ndarray) -> None:
@@ -56,6 +101,30 @@ class Strategy(ABC):
         if center.shape != self.center.shape:
             raise ValueError(f"Center of shape {center.shape} does not match the strategy's {self.center.shape}.")
         self.center = center.copy()
+
+    @property
+    def restored_legacy_state(self) -> bool:
+        """:return: Whether this strategy was unpickled from a file written before ``STATE_VERSION`` 2."""
+        return self.state_version < 2
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        # Files written before version 2 lack the attributes added since: fill them with their defaults.
+        state.setdefault("state_version", 1)
+        state.setdefault("best_params", np.asarray(state["center"], dtype=np.float64).copy())
+        state.setdefault("best_fitness", -np.inf)
+        state.setdefault("_asked", None)
+        self.__dict__.update(state)
+
+
+def candidate(population: Population, index: int) -> np.ndarray:
+    """
+    :param population: The candidates, dense or read from a noise table.
+    :param index: Which candidate.
+    :return: A float64 copy of that candidate (only that row is computed for a noise-table population).
+    """
+    if isinstance(population, NoiseTablePopulation):
+        return population.row(index)
+    return np.array(population[index], dtype=np.float64)
 
 
 def check_fitness(fitness: np.ndarray, expected: int) -> np.ndarray:

@@ -15,7 +15,7 @@ with warnings.catch_warnings():  # pycma warns at import when matplotlib (only u
     warnings.simplefilter("ignore")
     import cma
 
-from sb3_es.strategies.base import Strategy, check_fitness
+from sb3_es.strategies.base import Strategy
 
 Restarts = Literal["ipop", "bipop"] | None
 
@@ -77,7 +77,7 @@ class CMAESStrategy(Strategy):
     def __init__(
         self,
         center: np.ndarray,
-        sigma: float = 0.1,
+        sigma: float,
         population_size: int | None = None,
         diagonal: bool = False,
         restarts: Restarts = None,
@@ -85,8 +85,8 @@ class CMAESStrategy(Strategy):
         cma_options: dict[str, Any] | None = None,
         seed: int | np.random.SeedSequence | None = None,
     ) -> None:
-        super().__init__(center, seed)  # type: ignore[arg-type]
-        if not sigma > 0:
+        super().__init__(center, seed)
+        if not (np.isfinite(sigma) and sigma > 0):
             raise ValueError(f"sigma={sigma}: the initial step size must be positive.")
         if population_size is not None and population_size < 2:
             raise ValueError(f"population_size={population_size}: it must be at least 2 (or None for pycma's).")
@@ -104,12 +104,10 @@ class CMAESStrategy(Strategy):
         self.base_population_size = population_size or self.default_population_size
         self.n_restarts = 0
         self.last_stop: dict[str, Any] = {}
-        self.best_params = self.center.copy()
-        self.best_fitness = -np.inf
         self._budget = {"large": 0, "small": 0}
         self._regime = "large"
         self._large_restarts = 0
-        self._asked: list[np.ndarray] | None = None
+        self._solutions: list[np.ndarray] | None = None  # pycma's own list of the candidates asked
         self._exhausted = False
         self._np_state = np.random.RandomState(int(self.rng.integers(2**31 - 1))).get_state()
         if not diagonal:
@@ -161,22 +159,16 @@ class CMAESStrategy(Strategy):
         """:return: Current overall step size."""
         return float(self.es.sigma)
 
-    def ask(self) -> np.ndarray:
+    def _ask(self) -> np.ndarray:
         with self._private_random():
-            self._asked = self.es.ask()
-        return np.asarray(self._asked, dtype=np.float64)
+            self._solutions = self.es.ask()
+        return np.asarray(self._solutions, dtype=np.float64)
 
-    def tell(self, fitness: np.ndarray) -> dict[str, float]:
-        if self._asked is None:
-            raise RuntimeError("tell() called before ask().")
-        fitness = check_fitness(fitness, len(self._asked))
+    def _tell(self, fitness: np.ndarray) -> dict[str, float]:
+        assert self._solutions is not None
         with self._private_random():
-            self.es.tell(self._asked, (-fitness).tolist())  # pycma minimizes
-        best = int(np.argmax(fitness))
-        if fitness[best] > self.best_fitness:
-            self.best_fitness = float(fitness[best])
-            self.best_params = np.asarray(self._asked[best], dtype=np.float64).copy()
-        self._asked = None
+            self.es.tell(self._solutions, (-fitness).tolist())  # pycma minimizes
+        self._solutions = None
         self.center = np.asarray(self.es.mean, dtype=np.float64).copy()
         stats = {"sigma": self.sigma, "population_size": float(self.population_size), "restarts": self.n_restarts}
         self.last_stop = dict(self.es.stop())
@@ -214,3 +206,7 @@ class CMAESStrategy(Strategy):
     def set_center(self, center: np.ndarray) -> None:
         super().set_center(center)
         self.es = self._new_es(self.center, self.sigma, self.population_size)
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        state.setdefault("_solutions", state.pop("_asked", None))  # renamed in version 2
+        super().__setstate__(state)

@@ -76,11 +76,21 @@ def noise_rows(noise: np.ndarray, center: np.ndarray, offsets: np.ndarray, scale
     :return: Candidates ``(n, dim)``.
     """
     center = np.asarray(center, dtype=np.float64)
-    dim = center.shape[0]
-    rows = np.empty((len(offsets), dim))
+    rows = np.empty((len(offsets), center.shape[0]))
     for i, (offset, scale) in enumerate(zip(np.asarray(offsets).tolist(), np.asarray(scales).tolist())):
-        rows[i] = center + scale * noise[offset : offset + dim].astype(np.float64)
+        rows[i] = noise_row(noise, center, offset, scale)
     return rows
+
+
+def noise_row(noise: np.ndarray, center: np.ndarray, offset: int, scale: float) -> np.ndarray:
+    """
+    :param noise: The noise table's values.
+    :param center: Center ``(dim,)``, float64.
+    :param offset: Offset of the candidate's noise.
+    :param scale: Signed scale of the candidate's noise.
+    :return: The candidate ``center + scale * noise[offset:offset + dim]`` (float64).
+    """
+    return center + scale * noise[offset : offset + center.shape[0]].astype(np.float64)
 
 
 @dataclass
@@ -117,6 +127,14 @@ class NoiseTablePopulation:
         if self._dense is None:
             self._dense = noise_rows(self.table.noise, self.center, self.offsets, self.scales)
         return self._dense
+
+    def row(self, index: int) -> np.ndarray:
+        """
+        :param index: Which candidate.
+        :return: That candidate alone, float64, equal to ``dense()[index]``.
+        """
+        center = np.asarray(self.center, dtype=np.float64)
+        return noise_row(self.table.noise, center, int(self.offsets[index]), float(self.scales[index]))
 
     def __array__(self, dtype: Any = None, copy: bool | None = None) -> np.ndarray:
         return self.dense() if dtype is None else self.dense().astype(dtype)

@@ -1,0 +1,153 @@
+"""PGPE with ClipUp (Sehnke et al., 2010; Toklu et al., 2020) as an SB3 algorithm."""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar, TypeVar
+
+import numpy as np
+import torch as th
+from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback
+
+from sb3_es.common.population_algorithm import PopulationAlgorithm, check_positive
+from sb3_es.evaluation import PopulationEvaluator
+from sb3_es.pgpe.policies import FlatPolicy
+from sb3_es.strategies.fitness import FitnessShaping
+from sb3_es.strategies.optimizers import OptimizerName
+from sb3_es.strategies.pgpe import PGPEStrategy
+
+SelfPGPE = TypeVar("SelfPGPE", bound="PGPE")
+
+
+class PGPE(PopulationAlgorithm):
+    """
+    Parameter-exploring policy gradients (Sehnke et al., 2010, https://doi.org/10.1016/j.neunet.2009.12.004)
+    with the ClipUp optimizer (Toklu et al., 2020, https://arxiv.org/abs/2008.02387), as in EvoTorch:
+    symmetric sampling, one adaptive standard deviation per parameter with a bounded relative change, and
+    centered-rank fitness shaping. See :class:`~sb3_es.strategies.PGPEStrategy` for the update.
+
+    :param policy: ``"MlpPolicy"``, ``"LinearPolicy"`` or a :class:`~sb3_es.common.policies.FlatPolicy` class.
+    :param env: Environment, env id or VecEnv; each env slot evaluates a different candidate.
+    :param population_size: Candidates per generation (even: symmetric pairs).
+    :param stdev_init: Initial standard deviation of every parameter.
+    :param max_speed: ClipUp's largest step (norm of the velocity), a distance in parameter space; ``None``:
+        ``DEFAULT_MAX_SPEED`` (0.15). ClipUp only.
+    :param center_learning_rate: Step size of the center optimizer. ``None``: ``max_speed / 2`` with ClipUp (the
+        ClipUp paper's recommendation); required with ``"adam"`` or ``"sgd"``.
+    :param stdev_learning_rate: Step size of the standard deviations.
+    :param stdev_max_change: Largest relative change of a standard deviation per generation, in (0, 1).
+    :param optimizer: ``"clipup"`` (default), ``"adam"`` or ``"sgd"`` for the center.
+    :param momentum: ClipUp's (and SGD's) momentum.
+    :param fitness_shaping: ``"centered_rank"`` (default), ``"zscore"`` or ``"raw"``.
+    :param zero_policy: Start with the output layer at zero (hidden layers keep their random initialization; a
+        linear policy starts all-zero, as in the ARS paper).
+    :param alive_bonus_offset: Added to the fitness once per step.
+    :param reward_clip: Clip each step's reward to ``(low, high)`` in the fitness only (``None``: no clipping).
+    :param terminal_reward: In the fitness only, replace the reward of an episode's terminating step (e.g. ``0`` for
+        BipedalWalker's -100 fall penalty); ``None`` keeps it. See :class:`~sb3_es.evaluation.RewardShaping`.
+    :param n_eval_episodes: Episodes per candidate.
+    :param policy_kwargs: Keyword arguments for the policy.
+    :param stats_window_size: Episodes averaged in ``rollout/ep_rew_mean``.
+    :param tensorboard_log: TensorBoard log directory.
+    :param seed: Random seed.
+    :param verbose: Verbosity.
+    :param device: Torch device.
+    :param evaluator: ``"local"`` or a :class:`~sb3_es.evaluation.PopulationEvaluator` (e.g. Ray); not saved.
+    :param _init_setup_model: Whether to build the model at construction.
+    """
+
+    strategy: PGPEStrategy
+    #: ClipUp's max speed when ``max_speed`` is not given (pgpelib's CartPole example; the center learning rate
+    #: is then 0.075).
+    DEFAULT_MAX_SPEED: ClassVar[float] = 0.15
+
+    def __init__(
+        self,
+        policy: str | type[FlatPolicy],
+        env: GymEnv | str | None,
+        population_size: int = 50,
+        stdev_init: float = 0.1,
+        max_speed: float | None = None,
+        center_learning_rate: float | None = None,
+        stdev_learning_rate: float = 0.1,
+        stdev_max_change: float = 0.2,
+        optimizer: OptimizerName = "clipup",
+        momentum: float = 0.9,
+        fitness_shaping: FitnessShaping = "centered_rank",
+        zero_policy: bool = True,
+        alive_bonus_offset: float = 0,
+        reward_clip: tuple[float, float] | None = None,
+        terminal_reward: float | None = None,
+        n_eval_episodes: int = 1,
+        policy_kwargs: dict[str, Any] | None = None,
+        stats_window_size: int = 100,
+        tensorboard_log: str | None = None,
+        seed: int | None = None,
+        verbose: int = 0,
+        device: th.device | str = "cpu",
+        evaluator: str | PopulationEvaluator = "local",
+        _init_setup_model: bool = True,
+    ) -> None:
+        for name, value in (("max_speed", max_speed), ("center_learning_rate", center_learning_rate)):
+            if value is not None:
+                check_positive(name, value)
+        if optimizer != "clipup" and (center_learning_rate is None or max_speed is not None):
+            raise ValueError(
+                f"optimizer={optimizer!r}: pass center_learning_rate (None means max_speed / 2, a ClipUp setting) "
+                "and no max_speed (ClipUp's speed limit)."
+            )
+        super().__init__(
+            policy,
+            env,
+            n_eval_episodes=n_eval_episodes,
+            alive_bonus_offset=alive_bonus_offset,
+            reward_clip=reward_clip,
+            terminal_reward=terminal_reward,
+            zero_policy=zero_policy,
+            policy_kwargs=policy_kwargs,
+            stats_window_size=stats_window_size,
+            tensorboard_log=tensorboard_log,
+            seed=seed,
+            verbose=verbose,
+            device=device,
+            evaluator=evaluator,
+        )
+        self.population_size = population_size
+        self.stdev_init = stdev_init
+        self.max_speed = max_speed
+        self.center_learning_rate = center_learning_rate
+        self.stdev_learning_rate = stdev_learning_rate
+        self.stdev_max_change = stdev_max_change
+        self.optimizer = optimizer
+        self.momentum = momentum
+        self.fitness_shaping: FitnessShaping = fitness_shaping
+        if _init_setup_model:
+            self._setup_model()
+
+    def _make_strategy(self, center: np.ndarray, seed: np.random.SeedSequence) -> PGPEStrategy:
+        clipup = self.optimizer == "clipup"
+        max_speed = self.DEFAULT_MAX_SPEED if self.max_speed is None else self.max_speed
+        learning_rate = max_speed / 2 if self.center_learning_rate is None else self.center_learning_rate
+        return PGPEStrategy(
+            center,
+            self.population_size,
+            stdev_init=self.stdev_init,
+            center_learning_rate=learning_rate,
+            stdev_learning_rate=self.stdev_learning_rate,
+            stdev_max_change=self.stdev_max_change,
+            optimizer=self.optimizer,
+            max_speed=max_speed if clipup else None,
+            momentum=self.momentum,
+            fitness_shaping=self.fitness_shaping,
+            seed=seed,
+        )
+
+    def learn(
+        self: SelfPGPE,
+        total_timesteps: int,
+        callback: MaybeCallback = None,
+        log_interval: int = 1,
+        tb_log_name: str = "PGPE",
+        reset_num_timesteps: bool = True,
+        progress_bar: bool = False,
+    ) -> SelfPGPE:
+        return super().learn(total_timesteps, callback, log_interval, tb_log_name, reset_num_timesteps, progress_bar)

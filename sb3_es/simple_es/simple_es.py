@@ -1,0 +1,131 @@
+"""The elementary evolution strategies of seed 002 (WinnerES, weighted average of the top children) as an SB3
+algorithm."""
+
+from __future__ import annotations
+
+from typing import Any, TypeVar
+
+import numpy as np
+import torch as th
+from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
+
+from sb3_es.common.population_algorithm import (
+    PopulationAlgorithm,
+    check_positive,
+    initial_value,
+    make_noise_table,
+)
+from sb3_es.evaluation import PopulationEvaluator
+from sb3_es.simple_es.policies import FlatPolicy
+from sb3_es.strategies.simple_es import EliteWeights, SimpleESStrategy
+
+SelfSimpleES = TypeVar("SelfSimpleES", bound="SimpleES")
+
+
+class SimpleES(PopulationAlgorithm):
+    """
+    The simplest evolution strategy: ``population_size`` children ``center + sigma * eps``, and the center moves
+    to the weighted average of the ``n_elite`` best (see :class:`~sb3_es.strategies.SimpleESStrategy`).
+
+    - **WinnerES** (the default, ``n_elite=1``): the center moves to the best child.
+    - **Weighted average of the top n children**: ``n_elite=n``, with rank-based ``weights``.
+
+    :param policy: ``"MlpPolicy"``, ``"LinearPolicy"`` or a :class:`~sb3_es.common.policies.FlatPolicy` class.
+    :param env: Environment, env id or VecEnv; each env slot evaluates a different candidate.
+    :param population_size: Children per generation.
+    :param sigma: Standard deviation of the children, a float or an SB3 schedule.
+    :param n_elite: Number of best children averaged (1: WinnerES).
+    :param weights: ``"log"`` (CMA-ES's recombination weights, the default), ``"linear"`` or ``"equal"``.
+    :param zero_policy: Start with the output layer at zero (hidden layers keep their random initialization; a
+        linear policy starts all-zero, as in the ARS paper).
+    :param alive_bonus_offset: Added to the fitness once per step.
+    :param reward_clip: Clip each step's reward to ``(low, high)`` in the fitness only (``None``: no clipping).
+    :param terminal_reward: In the fitness only, replace the reward of an episode's terminating step; ``None``
+        keeps it. See :class:`~sb3_es.evaluation.RewardShaping`.
+    :param n_eval_episodes: Episodes per candidate.
+    :param policy_kwargs: Keyword arguments for the policy.
+    :param stats_window_size: Episodes averaged in ``rollout/ep_rew_mean``.
+    :param tensorboard_log: TensorBoard log directory.
+    :param seed: Random seed.
+    :param verbose: Verbosity.
+    :param device: Torch device.
+    :param evaluator: ``"local"`` or a :class:`~sb3_es.evaluation.PopulationEvaluator` (e.g. Ray); not saved.
+    :param noise_table_size: Read perturbations from a shared noise table of this many float32 values instead of
+        drawing them fresh (a Ray evaluator then sends an offset per candidate). ``None`` (default) draws them fresh.
+    :param _init_setup_model: Whether to build the model at construction.
+    """
+
+    strategy: SimpleESStrategy
+    scheduled_hyperparameters = ("sigma",)
+
+    def __init__(
+        self,
+        policy: str | type[FlatPolicy],
+        env: GymEnv | str | None,
+        population_size: int = 16,
+        sigma: float | Schedule = 0.1,
+        n_elite: int = 1,
+        weights: EliteWeights = "log",
+        zero_policy: bool = True,
+        alive_bonus_offset: float = 0,
+        reward_clip: tuple[float, float] | None = None,
+        terminal_reward: float | None = None,
+        n_eval_episodes: int = 1,
+        policy_kwargs: dict[str, Any] | None = None,
+        stats_window_size: int = 100,
+        tensorboard_log: str | None = None,
+        seed: int | None = None,
+        verbose: int = 0,
+        device: th.device | str = "cpu",
+        evaluator: str | PopulationEvaluator = "local",
+        noise_table_size: int | None = None,
+        _init_setup_model: bool = True,
+    ) -> None:
+        check_positive("sigma", sigma)
+        if noise_table_size is not None and int(noise_table_size) < 1:
+            raise ValueError(f"noise_table_size={noise_table_size}: use a positive size or None.")
+        super().__init__(
+            policy,
+            env,
+            n_eval_episodes=n_eval_episodes,
+            alive_bonus_offset=alive_bonus_offset,
+            reward_clip=reward_clip,
+            terminal_reward=terminal_reward,
+            zero_policy=zero_policy,
+            policy_kwargs=policy_kwargs,
+            stats_window_size=stats_window_size,
+            tensorboard_log=tensorboard_log,
+            seed=seed,
+            verbose=verbose,
+            device=device,
+            evaluator=evaluator,
+        )
+        self.population_size = population_size
+        self.sigma = sigma
+        self.n_elite = n_elite
+        self.weights: EliteWeights = weights
+        self.noise_table_size = noise_table_size
+        if _init_setup_model:
+            self._setup_model()
+
+    def _make_strategy(self, center: np.ndarray, seed: np.random.SeedSequence) -> SimpleESStrategy:
+        return SimpleESStrategy(
+            center,
+            self.population_size,
+            sigma=initial_value(self.sigma),
+            n_elite=self.n_elite,
+            weights=self.weights,
+            seed=seed,
+            noise_table=make_noise_table(self.noise_table_size, seed),
+        )
+
+    def learn(
+        self: SelfSimpleES,
+        total_timesteps: int,
+        callback: MaybeCallback = None,
+        log_interval: int = 1,
+        tb_log_name: str = "SimpleES",
+        reset_num_timesteps: bool = True,
+        progress_bar: bool = False,
+    ) -> SelfSimpleES:
+        return super().learn(total_timesteps, callback, log_interval, tb_log_name, reset_num_timesteps, progress_bar)

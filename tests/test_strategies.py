@@ -1,0 +1,145 @@
+"""The strategy layer's shared steps (checked once for every strategy) and the optimizers module (ClipUp)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+import pytest
+import torch as th
+
+from sb3_es.strategies import (
+    ARSStrategy,
+    ClipUp,
+    CMAESStrategy,
+    OpenESStrategy,
+    PGPEStrategy,
+    SimpleESStrategy,
+    Strategy,
+)
+from sb3_es.strategies.noise import SharedNoiseTable
+from sb3_es.strategies.optimizers import make_optimizer
+
+STRATEGIES: dict[str, Callable[..., Strategy]] = {
+    "ars": lambda center, **kw: ARSStrategy(center, 3, 3, delta_std=0.1, learning_rate=0.05, **kw),
+    "openes": lambda center, **kw: OpenESStrategy(center, 6, sigma=0.1, learning_rate=0.05, **kw),
+    "cmaes": lambda center, **kw: CMAESStrategy(center, 0.1, population_size=6, **kw),
+    "pgpe": lambda center, **kw: PGPEStrategy(center, 6, stdev_init=0.1, center_learning_rate=0.05, **kw),
+    "simple_es": lambda center, **kw: SimpleESStrategy(center, 6, sigma=0.1, n_elite=2, **kw),
+}
+
+
+@pytest.mark.parametrize("name", STRATEGIES)
+def test_best_candidate_is_tracked_by_every_strategy(name: str) -> None:
+    strategy = STRATEGIES[name](np.zeros(4), seed=0)
+    assert strategy.best_fitness == -np.inf
+    first = np.asarray(strategy.ask()).copy()
+    info = strategy.tell(np.array([1.0, 9.0, 3.0, 2.0, 0.0, -1.0]))
+    assert strategy.best_fitness == info["best_fitness"] == 9.0
+    np.testing.assert_array_equal(strategy.best_params, first[1])
+    strategy.ask()
+    strategy.tell(np.array([4.0, 0.0, 5.0, 1.0, 2.0, 3.0]))  # worse: the best stays
+    assert strategy.best_fitness == 9.0
+    np.testing.assert_array_equal(strategy.best_params, first[1])
+
+
+@pytest.mark.parametrize("name", STRATEGIES)
+def test_tell_checks_the_fitness_before_changing_anything(name: str) -> None:
+    strategy = STRATEGIES[name](np.ones(4), seed=0)
+    with pytest.raises(RuntimeError, match="before ask"):
+        strategy.tell(np.zeros(6))
+    strategy.ask()
+    center = strategy.center.copy()
+    with pytest.raises(ValueError, match="Expected 6 fitness values"):
+        strategy.tell(np.zeros(5))
+    with pytest.raises(ValueError, match=r"candidate\(s\) \[2\]"):
+        strategy.tell(np.array([0.0, 1.0, np.nan, 0.0, 0.0, 0.0]))
+    np.testing.assert_array_equal(strategy.center, center)
+    assert strategy.best_fitness == -np.inf
+    strategy.tell(np.arange(6.0))  # the asked population is still there
+    assert not np.array_equal(strategy.center, center)
+
+
+def test_best_params_of_a_noise_table_population_are_its_row() -> None:
+    table = SharedNoiseTable(10_000, seed=1)
+    strategy = OpenESStrategy(np.arange(4.0), 6, sigma=0.3, learning_rate=0.05, noise_table=table, seed=0)
+    population = strategy.ask()
+    dense = np.asarray(population).copy()
+    strategy.tell(np.array([0.0, 1.0, 2.0, 7.0, 3.0, 4.0]))
+    np.testing.assert_array_equal(strategy.best_params, dense[3])
+
+
+@pytest.mark.parametrize("name", STRATEGIES)
+def test_every_strategy_maximizes_a_sphere(name: str) -> None:
+    """20 generations of -||x - 1||^2 from 0 in 4 dimensions: the center gets closer to the optimum."""
+    strategy = STRATEGIES[name](np.zeros(4), seed=0)
+    for _ in range(20):
+        population = np.asarray(strategy.ask())
+        strategy.tell(-np.sum((population - 1.0) ** 2, axis=1))
+    assert np.linalg.norm(strategy.center - 1.0) < 0.7 * np.linalg.norm(np.ones(4))
+
+
+# ---------------------------------------------------------------------------- ClipUp
+def clipup_steps(grads: list[np.ndarray], lr: float, max_speed: float, momentum: float = 0.9) -> list[np.ndarray]:
+    """Positions after each ClipUp step from 0 (the optimizer minimizes: it moves against the gradient)."""
+    theta = th.nn.Parameter(th.zeros(len(grads[0]), dtype=th.float64))
+    optimizer = ClipUp([theta], lr=lr, max_speed=max_speed, momentum=momentum)
+    positions = []
+    for grad in grads:
+        theta.grad = th.as_tensor(grad, dtype=th.float64)
+        optimizer.step()
+        positions.append(theta.detach().numpy().copy())
+    return positions
+
+
+def test_clipup_steps_along_the_normalized_gradient_with_momentum() -> None:
+    g1, g2 = np.array([3.0, 4.0]), np.array([0.0, -10.0])
+    first, second = clipup_steps([g1, g2], lr=0.1, max_speed=1.0)
+    v1 = 0.1 * g1 / 5.0  # the step length does not depend on the gradient's scale
+    np.testing.assert_allclose(first, -v1, rtol=1e-12)
+    v2 = 0.9 * v1 + 0.1 * g2 / 10.0
+    np.testing.assert_allclose(second, -v1 - v2, rtol=1e-12)
+    # Scaling the gradients changes nothing.
+    np.testing.assert_allclose(clipup_steps([1e6 * g1, 1e-6 * g2], lr=0.1, max_speed=1.0)[1], second, rtol=1e-12)
+
+
+def test_clipup_caps_the_speed() -> None:
+    grad = np.array([1.0, 2.0, 2.0])
+    positions = clipup_steps([grad] * 30, lr=0.1, max_speed=0.25)
+    steps = np.diff(np.vstack([np.zeros(3), *positions]), axis=0)
+    speeds = np.linalg.norm(steps, axis=1)
+    assert np.all(speeds <= 0.25 + 1e-12)
+    # Momentum builds the velocity up to lr / (1 - momentum) = 1.0, so the cap is reached and held.
+    np.testing.assert_allclose(speeds[-10:], 0.25, rtol=1e-12)
+    assert speeds[0] == pytest.approx(0.1)
+
+
+def test_clipup_zero_gradient_keeps_coasting() -> None:
+    first, second = clipup_steps([np.array([0.0, 2.0]), np.zeros(2)], lr=0.1, max_speed=1.0)
+    np.testing.assert_allclose(second - first, 0.9 * first, rtol=1e-12)
+
+
+def test_clipup_default_max_speed_is_twice_the_learning_rate() -> None:
+    theta = th.nn.Parameter(th.zeros(2, dtype=th.float64))
+    assert ClipUp([theta], lr=0.15).param_groups[0]["max_speed"] == pytest.approx(0.3)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [(dict(lr=0.0), "lr"), (dict(lr=0.1, max_speed=-1.0), "max_speed"), (dict(lr=0.1, momentum=1.0), "momentum")],
+)
+def test_clipup_rejects_bad_settings(kwargs: dict, match: str) -> None:
+    theta = th.nn.Parameter(th.zeros(2, dtype=th.float64))
+    with pytest.raises(ValueError, match=match):
+        ClipUp([theta], **kwargs)
+
+
+def test_make_optimizer_names() -> None:
+    theta = th.nn.Parameter(th.zeros(2, dtype=th.float64))
+    assert isinstance(make_optimizer("adam", [theta], 0.1), th.optim.Adam)
+    assert isinstance(make_optimizer("sgd", [theta], 0.1), th.optim.SGD)
+    assert isinstance(make_optimizer("clipup", [theta], 0.1, max_speed=0.3), ClipUp)
+    with pytest.raises(ValueError, match="optimizer='rmsprop'"):
+        make_optimizer("rmsprop", [theta], 0.1)  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="max_speed"):
+        make_optimizer("adam", [theta], 0.1, max_speed=0.3)
