@@ -135,6 +135,10 @@ class Counter(BaseCallback):
         self.steps += self.locals["n_envs"]
         self.dones += int(np.sum(self.locals["dones"]))
         assert len(self.locals["infos"]) == self.locals["n_envs"] == len(self.locals["dones"])
+        # The replay gives the remote steps' rewards; observations and actions are not sent back.
+        assert np.shape(self.locals["rewards"]) == (self.locals["n_envs"],)
+        assert np.all(np.isfinite(self.locals["rewards"]))
+        assert self.locals["new_obs"] is None and self.locals["actions"] is None
         return self.stop_at is None or self.n_calls < self.stop_at
 
 
