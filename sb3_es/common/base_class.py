@@ -97,6 +97,12 @@ class ESBaseAlgorithm(BaseAlgorithm):
     def _excluded_save_params(self) -> list[str]:
         return [*super()._excluded_save_params(), "_added_time_limit", "_warned_time_limit"]
 
+    def set_env(self, env: GymEnv, force_reset: bool = True) -> None:
+        super().set_env(env, force_reset)
+        # A new env: its own time limit (or the lack of one) counts from now on.
+        self._added_time_limit = None
+        self._warned_time_limit = False
+
     def episode_step_limit(self) -> int:
         """
         The episode length at which training cuts an episode: ``max_episode_steps`` if given, else the env's

@@ -348,7 +348,7 @@ class PopulationAlgorithm(ESBaseAlgorithm):
             seed,
             step_hook,
             self.reward_shaping,
-            self.episode_step_limit(),
+            max_episode_steps=self.episode_step_limit(),
         )
         callback.on_rollout_end()
         if result.stopped:
