@@ -101,6 +101,8 @@ def main() -> int:
             "no:cacheprovider",
             "--import-mode=importlib",
             f"--timeout={args.timeout}",
+            "-o",
+            "timeout_func_only=true",  # time the test, not the formatting of its report
             "-q",
             "-rfE",
             *FOLDERS.values(),
