@@ -6,7 +6,7 @@ STAMP := $(VENV)/.stamp
 LINT_PATHS := $(wildcard sb3_es tests benchmarks examples)
 
 .DEFAULT_GOAL := help
-.PHONY: help venv train test lint typecheck docs bench clean
+.PHONY: help venv train test lint typecheck docs bench conformance clean
 
 help:
 	@echo "make train      set up .venv and run a short ARS training (TensorBoard logs + saved model)"
@@ -15,6 +15,7 @@ help:
 	@echo "make typecheck  mypy"
 	@echo "make docs       build the Sphinx docs into docs/_build/html"
 	@echo "make bench      run benchmarks/run_all.py"
+	@echo "make conformance  run the pinned stable-baselines3 / sb3-contrib test files on sb3-es (downloads them)"
 	@echo "make clean      remove build outputs and caches (keeps .venv)"
 
 venv: $(STAMP)
@@ -50,6 +51,11 @@ bench: venv
 	else \
 		echo "benchmarks/run_all.py does not exist yet"; \
 	fi
+
+# Downloads the pinned SB3 and sb3-contrib source distributions from PyPI at run time (their tests are never
+# committed) and runs them with sb3-es's classes substituted (tests/conformance/). Not part of `make test`.
+conformance: venv
+	$(BIN)/python tests/conformance/run.py $(CONFORMANCE_ARGS)
 
 clean:
 	rm -rf docs/_build build dist *.egg-info .pytest_cache .mypy_cache .ruff_cache

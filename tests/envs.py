@@ -121,6 +121,97 @@ class MultiDiscreteActionEnv(gym.Env):
         return np.zeros(2, dtype=np.float32), 0.0, False, True, {}
 
 
+class NeverEndingEnv(gym.Env):
+    """
+    An env whose episodes never end (no termination, no truncation, no time limit): the reward is ``-(a - 0.5)**2``
+    for the first action entry (``Box``) or ``1`` for action ``1`` (``Discrete(2)``), the observation a sawtooth.
+    """
+
+    def __init__(self, discrete: bool = False) -> None:
+        self.observation_space = spaces.Box(-10.0, 10.0, shape=(2,), dtype=np.float32)
+        self.action_space: spaces.Space = (
+            spaces.Discrete(2) if discrete else spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
+        )
+        self.discrete = discrete
+        self.t = 0
+
+    def _obs(self) -> np.ndarray:
+        return np.array([(self.t % 7) / 7.0, 1.0], dtype=np.float32)
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[np.ndarray, dict]:
+        super().reset(seed=seed)
+        self.t = 0
+        return self._obs(), {}
+
+    def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict]:
+        self.t += 1
+        if self.discrete:
+            reward = float(int(action) == 1)
+        else:
+            reward = -((float(np.asarray(action).reshape(-1)[0]) - 0.5) ** 2)
+        return self._obs(), reward, False, False, {}
+
+
+#: Registered without ``max_episode_steps``, so that ``gym.make`` adds no ``TimeLimit``.
+NEVER_ENDING_ID = "sb3es_tests/NeverEnding-v0"
+if NEVER_ENDING_ID not in gym.registry:
+    gym.register(NEVER_ENDING_ID, entry_point=NeverEndingEnv)
+
+
+class SuccessInfoWrapper(gym.Wrapper):
+    """Adds ``info["is_success"]`` at the end of each episode: True when the episode terminated (not truncated)."""
+
+    def step(self, action: Any) -> Any:
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        if terminated or truncated:
+            info["is_success"] = bool(terminated)
+        return obs, reward, terminated, truncated, info
+
+
+class NaNObsWrapper(gym.Wrapper):
+    """Returns observations full of NaN at the ``at``-th step of the env's life (once)."""
+
+    def __init__(self, env: gym.Env, at: int = 3) -> None:
+        super().__init__(env)
+        self.at = at
+        self.steps = 0
+
+    def step(self, action: Any) -> Any:
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        self.steps += 1
+        if self.steps == self.at:
+            obs = np.full_like(obs, np.nan)
+        return obs, reward, terminated, truncated, info
+
+
+class DiscreteMatchEnv(gym.Env):
+    """
+    A ``Discrete(4)`` observation drawn at random each step; the reward is 1 when the ``Discrete(4)`` action is the
+    observation's target (``TARGETS[obs]``), else 0. Episodes last 10 steps: a policy that solves it returns 10, a
+    random one 2.5.
+    """
+
+    TARGETS = (2, 0, 3, 1)
+
+    def __init__(self) -> None:
+        self.observation_space = spaces.Discrete(4)
+        self.action_space = spaces.Discrete(4)
+        self.state = 0
+        self.t = 0
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[int, dict]:
+        super().reset(seed=seed)
+        self.t = 0
+        self.state = int(self.np_random.integers(4))
+        return self.state, {}
+
+    def step(self, action: Any) -> tuple[int, float, bool, bool, dict]:
+        reward = float(int(action) == self.TARGETS[self.state])
+        self.t += 1
+        self.state = int(self.np_random.integers(4))
+        return self.state, reward, False, self.t >= 10, {}
+
+
 def rollout(
     env: gym.Env, policy: FlatPolicy, params: np.ndarray, seed: int | None = None
 ) -> tuple[float, int, list[np.ndarray]]:

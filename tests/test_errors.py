@@ -74,12 +74,6 @@ def test_multi_discrete_action_env() -> None:
     assert "action space" in str(info.value)
 
 
-def test_discrete_observation_env() -> None:
-    with pytest.raises(ValueError, match="Discrete") as info:
-        ARS("MlpPolicy", "FrozenLake-v1")
-    assert "FlattenObservation" in str(info.value)
-
-
 def test_unknown_policy_alias() -> None:
     with pytest.raises(ValueError, match="CnnPolicy"):
         ARS("CnnPolicy", "Pendulum-v1")

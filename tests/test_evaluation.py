@@ -31,7 +31,7 @@ def reference(policy: FlatPolicy, population: np.ndarray, n_episodes: int, **env
             returns[k, e], lengths[k, e], obs = rollout(env, policy, params)
             seen.extend(obs)
     seen = np.array(seen)
-    return dict(returns=returns, lengths=lengths, obs_total=seen.sum(0), obs_total_sq=np.square(seen).sum(0))
+    return dict(returns=returns, lengths=lengths, obs_mean=seen.mean(0), obs_var=seen.var(0))
 
 
 def toy_vec_env(n_envs: int, counter: list[int] | None = None, **env_kwargs: Any) -> DummyVecEnv:
@@ -47,7 +47,7 @@ def evaluate_counting(
 ) -> tuple[PopulationResult, int]:
     calls = [0]
 
-    def hook(n_envs: int, infos: list, dones: np.ndarray) -> bool:
+    def hook(n_envs: int, infos: list, dones: np.ndarray, *_: Any) -> bool:
         calls[0] += 1
         return True
 
@@ -81,8 +81,8 @@ def test_returns_match_sequential_rollouts(n_envs: int, n_episodes: int, discret
     assert counter[0] == result.n_steps
     # Only the candidates' observations enter the statistics (not the idle slots running the center).
     assert result.obs_stats.count == expected["lengths"].sum()
-    np.testing.assert_allclose(result.obs_stats.total, expected["obs_total"], rtol=1e-5)
-    np.testing.assert_allclose(result.obs_stats.total_sq, expected["obs_total_sq"], rtol=1e-5)
+    np.testing.assert_allclose(result.obs_stats.mean, expected["obs_mean"], rtol=1e-5)
+    np.testing.assert_allclose(result.obs_stats.var, expected["obs_var"], rtol=1e-5)
 
 
 def test_each_candidate_gets_exactly_n_episodes() -> None:
@@ -132,7 +132,7 @@ def test_linger_keeps_all_slots_on_the_center() -> None:
     # First asked at the step the plain run ended on; the candidates' results are unchanged.
     assert asked[0] == plain.n_steps
     np.testing.assert_array_equal(result.returns, plain.returns)
-    np.testing.assert_array_equal(result.obs_stats.total, plain.obs_stats.total)
+    np.testing.assert_array_equal(result.obs_stats.mean, plain.obs_stats.mean)
     assert result.n_steps == counter[0] == plain.n_steps + 6 * 4
     # Six steps of 4 slots on the two-step center: at least 3 more center episodes per slot, all alike.
     assert len(result.center_returns) >= len(plain.center_returns) + 4 * 2
@@ -146,7 +146,7 @@ def test_step_hook_stops_promptly() -> None:
     env = toy_vec_env(2, counter)
     calls = []
 
-    def hook(n_envs: int, infos: list, dones: np.ndarray) -> bool:
+    def hook(n_envs: int, infos: list, dones: np.ndarray, *_: Any) -> bool:
         assert n_envs == 2 and len(infos) == 2 and dones.shape == (2,)
         calls.append(1)
         return len(calls) < 4
@@ -166,7 +166,7 @@ def test_step_hook_stop_after_last_job_is_not_a_stop() -> None:
     steps_needed = int(expected["lengths"].max())
     calls = [0]
 
-    def hook(n_envs: int, infos: list, dones: np.ndarray) -> bool:
+    def hook(n_envs: int, infos: list, dones: np.ndarray, *_: Any) -> bool:
         calls[0] += 1
         return calls[0] < steps_needed
 
@@ -222,4 +222,4 @@ def test_vec_normalize_wrapper() -> None:
     np.testing.assert_allclose(sorted(result.returns.ravel()), monitor_returns, rtol=1e-4, atol=1e-3)
     # The policy sees the normalized observations (VecNormalize statistics were updated while stepping).
     assert env.obs_rms.count > 400
-    assert np.all(np.abs(result.obs_stats.total / result.obs_stats.count) < 5.0)
+    assert np.all(np.abs(result.obs_stats.mean) < 5.0)

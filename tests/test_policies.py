@@ -273,10 +273,9 @@ def test_dict_observations_mlp_population_matches_predict() -> None:
 @pytest.mark.parametrize(
     ("observation_space", "name"),
     [
-        (spaces.Discrete(5), "Discrete"),
         (spaces.Tuple((spaces.Box(-1, 1, (2,)), spaces.Discrete(3))), "Tuple"),
-        (spaces.MultiBinary(4), "MultiBinary"),
-        (spaces.Dict({"a": spaces.Box(-1, 1, (2,)), "b": spaces.Discrete(3)}), "Discrete"),
+        (spaces.Text(5), "Text"),
+        (spaces.Dict({"a": spaces.Box(-1, 1, (2,)), "b": spaces.Tuple((spaces.Discrete(3),))}), "Tuple"),
     ],
 )
 @pytest.mark.parametrize("policy_class", [MlpPolicy, LinearPolicy])

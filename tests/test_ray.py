@@ -115,9 +115,9 @@ def assert_same_candidates(ray_result: PopulationResult, local: PopulationResult
     np.testing.assert_array_equal(ray_result.returns, local.returns)
     np.testing.assert_array_equal(ray_result.lengths, local.lengths)
     assert ray_result.obs_stats.count == local.obs_stats.count
-    # Exact sums; only the order of the float64 additions differs.
-    np.testing.assert_allclose(ray_result.obs_stats.total, local.obs_stats.total, rtol=1e-12)
-    np.testing.assert_allclose(ray_result.obs_stats.total_sq, local.obs_stats.total_sq, rtol=1e-12)
+    # The same moments; only the order of the float64 merges differs.
+    np.testing.assert_allclose(ray_result.obs_stats.mean, local.obs_stats.mean, rtol=1e-12)
+    np.testing.assert_allclose(ray_result.obs_stats.var, local.obs_stats.var, rtol=1e-10)
     assert len(ray_result.ep_infos) == len(local.ep_infos)
     assert not ray_result.stopped
 
@@ -135,6 +135,10 @@ class Counter(BaseCallback):
         self.steps += self.locals["n_envs"]
         self.dones += int(np.sum(self.locals["dones"]))
         assert len(self.locals["infos"]) == self.locals["n_envs"] == len(self.locals["dones"])
+        # The replay gives the remote steps' rewards; observations and actions are not sent back.
+        assert np.shape(self.locals["rewards"]) == (self.locals["n_envs"],)
+        assert np.all(np.isfinite(self.locals["rewards"]))
+        assert self.locals["new_obs"] is None and self.locals["actions"] is None
         return self.stop_at is None or self.n_calls < self.stop_at
 
 
@@ -145,7 +149,7 @@ def test_same_results_as_local_engine(toy_ray: RayEvaluator) -> None:
     remote_steps(toy_ray)
     calls: list[int] = []
 
-    def hook(n_envs: int, infos: list[dict[str, Any]], dones: np.ndarray) -> bool:
+    def hook(n_envs: int, infos: list[dict[str, Any]], dones: np.ndarray, *_: Any) -> bool:
         calls.append(n_envs)
         return True
 
@@ -167,7 +171,7 @@ def test_same_results_as_local_engine(toy_ray: RayEvaluator) -> None:
         policy, population[:1], center, 1, seed=5
     )
     assert_same_candidates(one, local_one)
-    np.testing.assert_array_equal(one.obs_stats.total, local_one.obs_stats.total)
+    np.testing.assert_array_equal(one.obs_stats.mean, local_one.obs_stats.mean)
     assert one.n_steps == local_one.n_steps
     assert one.center_returns == local_one.center_returns
     assert toy_ray.last_timings["linger_times"] == [0.0]
@@ -188,7 +192,7 @@ def test_noise_table_population(toy_ray: RayEvaluator) -> None:
     from_table = toy_ray.evaluate(policy, population, center, 1, seed=2)
     from_rows = toy_ray.evaluate(policy, dense, center, 1, seed=2)
     np.testing.assert_array_equal(from_table.returns, from_rows.returns)
-    np.testing.assert_array_equal(from_table.obs_stats.total, from_rows.obs_stats.total)
+    np.testing.assert_array_equal(from_table.obs_stats.mean, from_rows.obs_stats.mean)
 
 
 def make_ars(env: Any, **kwargs: Any) -> ARS:

@@ -50,6 +50,8 @@ class CMAES(PopulationAlgorithm):
     :param verbose: Verbosity.
     :param device: Torch device.
     :param evaluator: ``"local"`` or a :class:`~sb3_es.evaluation.PopulationEvaluator` (e.g. Ray); not saved.
+    :param max_episode_steps: Longest episode training runs, in env steps (an episode reaching it is truncated);
+        ``None``: the env's ``TimeLimit``, or 1000 steps, with a warning, for an env without one.
     :param _init_setup_model: Whether to build the model at construction.
     """
 
@@ -79,6 +81,7 @@ class CMAES(PopulationAlgorithm):
         verbose: int = 0,
         device: th.device | str = "cpu",
         evaluator: str | PopulationEvaluator = "local",
+        max_episode_steps: int | None = None,
         _init_setup_model: bool = True,
     ) -> None:
         check_positive("sigma", sigma)
@@ -100,6 +103,7 @@ class CMAES(PopulationAlgorithm):
             verbose=verbose,
             device=device,
             evaluator=evaluator,
+            max_episode_steps=max_episode_steps,
         )
         self.sigma = sigma
         self.population_size = population_size

@@ -5,16 +5,25 @@ from __future__ import annotations
 
 import io
 import pathlib
+import warnings
 from typing import Any, TypeVar
 
+import gymnasium as gym
 import torch as th
-from stable_baselines3.common.base_class import BaseAlgorithm
+from gymnasium.wrappers import TimeLimit
+from stable_baselines3.common.base_class import BaseAlgorithm, maybe_make_env
+from stable_baselines3.common.env_util import is_wrapped
 from stable_baselines3.common.on_policy_algorithm import OnPolicyAlgorithm
 from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, Schedule, TensorDict
 
 from sb3_es.common.checks import check_scheduled_value, check_seed
 from sb3_es.common.save_util import check_save_file
+from sb3_es.evaluation.time_limit import env_time_limit
+
+#: Episode length cap for an env without a time limit, when ``max_episode_steps`` is not given (the length of
+#: MuJoCo's and dm_control's episodes).
+DEFAULT_MAX_EPISODE_STEPS = 1000
 
 SelfESBaseAlgorithm = TypeVar("SelfESBaseAlgorithm", bound="ESBaseAlgorithm")
 
@@ -32,6 +41,8 @@ class ESBaseAlgorithm(BaseAlgorithm):
       another algorithm's save; subclasses check their own state in :meth:`_check_save_data`.
     - The learning-rate schedule is checked whenever the progress moves (every generation or update).
     - ``dump_logs`` is SB3's ``OnPolicyAlgorithm.dump_logs`` (``rollout/`` and ``time/`` keys).
+    - Every episode ends, so that ``learn()`` returns: an env given by its id that has no time limit is wrapped in
+      gymnasium's ``TimeLimit``, and the evaluation cuts any episode at :meth:`episode_step_limit` steps.
 
     :param policy: Policy class or alias.
     :param env: Environment, env id or VecEnv.
@@ -42,6 +53,9 @@ class ESBaseAlgorithm(BaseAlgorithm):
     :param verbose: Verbosity.
     :param device: Torch device.
     :param seed: Random seed.
+    :param max_episode_steps: Longest episode, in env steps, that training runs: an episode that reaches it is
+        truncated (as by a ``TimeLimit``). ``None``: the env's own ``TimeLimit``, or, for an env without one,
+        ``DEFAULT_MAX_EPISODE_STEPS`` (1000) with a warning at ``learn()``.
     """
 
     def __init__(
@@ -55,8 +69,21 @@ class ESBaseAlgorithm(BaseAlgorithm):
         verbose: int,
         device: th.device | str,
         seed: int | None,
+        max_episode_steps: int | None = None,
     ) -> None:
         check_seed(seed)
+        if max_episode_steps is not None and (int(max_episode_steps) != max_episode_steps or max_episode_steps < 1):
+            raise ValueError(f"max_episode_steps={max_episode_steps}: it must be a positive integer or None.")
+        self.max_episode_steps = None if max_episode_steps is None else int(max_episode_steps)
+        #: Length limit of the ``TimeLimit`` added to an env given by its id that had none (not saved).
+        self._added_time_limit: int | None = None
+        self._warned_time_limit = False
+        if isinstance(env, str):
+            env = maybe_make_env(env, verbose)
+            assert isinstance(env, gym.Env)
+            if not is_wrapped(env, TimeLimit):
+                self._added_time_limit = self.max_episode_steps or DEFAULT_MAX_EPISODE_STEPS
+                env = TimeLimit(env, self._added_time_limit)
         if isinstance(policy, str):
             policy = self._get_policy_from_name(policy)
         super().__init__(
@@ -72,6 +99,39 @@ class ESBaseAlgorithm(BaseAlgorithm):
             seed=seed,
         )
         self._algorithm_name = type(self).__name__
+
+    def _excluded_save_params(self) -> list[str]:
+        return [*super()._excluded_save_params(), "_added_time_limit", "_warned_time_limit"]
+
+    def set_env(self, env: GymEnv, force_reset: bool = True) -> None:
+        super().set_env(env, force_reset)
+        # A new env: its own time limit (or the lack of one) counts from now on.
+        self._added_time_limit = None
+        self._warned_time_limit = False
+
+    def episode_step_limit(self) -> int:
+        """
+        The episode length at which training cuts an episode: ``max_episode_steps`` if given, else the env's
+        ``TimeLimit``, else ``DEFAULT_MAX_EPISODE_STEPS``, with a warning (once per model) when the env has no
+        time limit of its own.
+
+        :return: The cap, in env steps.
+        """
+        limit = env_time_limit(self.env) if self.env is not None else None
+        if self.max_episode_steps is not None:
+            return self.max_episode_steps
+        if limit is not None and self._added_time_limit is None:
+            return limit
+        cap = self._added_time_limit or DEFAULT_MAX_EPISODE_STEPS
+        if not self._warned_time_limit:
+            self._warned_time_limit = True
+            warnings.warn(
+                f"The env has no time limit (gymnasium's TimeLimit): {type(self).__name__} ends its episodes at "
+                f"{cap} steps, so that every candidate's episode ends. Pass max_episode_steps= to choose the "
+                "limit (and silence this warning), or register the env with max_episode_steps.",
+                stacklevel=3,
+            )
+        return cap
 
     @classmethod
     def _check_save_data(cls, path: str | pathlib.Path | io.BufferedIOBase, data: dict[str, Any]) -> None:

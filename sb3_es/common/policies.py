@@ -24,6 +24,7 @@ import numpy as np
 import torch as th
 from gymnasium import spaces
 from stable_baselines3.common.policies import BasePolicy
+from stable_baselines3.common.preprocessing import get_flattened_obs_dim, preprocess_obs
 from stable_baselines3.common.running_mean_std import RunningMeanStd
 from stable_baselines3.common.torch_layers import create_mlp
 from stable_baselines3.common.type_aliases import PyTorchObs
@@ -33,35 +34,53 @@ from torch import nn
 OBS_NORM_EPS = 1e-8
 
 
+#: Observation spaces a policy takes, alone or as the entries of a ``Dict``.
+FLAT_OBS_SPACES = (spaces.Box, spaces.Discrete, spaces.MultiDiscrete, spaces.MultiBinary)
+
+
 def flat_obs_dim(observation_space: spaces.Space) -> int:
     """
     Size of the flattened observation vector, or a clear error for a space that cannot be flattened.
 
-    :param observation_space: A ``Box`` or a ``Dict`` of ``Box`` spaces (e.g. dm_control through shimmy).
+    :param observation_space: A ``Box``, ``Discrete``, ``MultiDiscrete`` or ``MultiBinary`` space, or a ``Dict`` of
+        them (e.g. dm_control through shimmy). Discrete entries count one input per value (one-hot).
     :return: Number of scalars in one flattened observation.
     """
-    if isinstance(observation_space, spaces.Box):
-        return int(np.prod(observation_space.shape))
     if isinstance(observation_space, spaces.Dict):
-        bad = {k: type(s).__name__ for k, s in observation_space.spaces.items() if not isinstance(s, spaces.Box)}
+        bad = {k: type(s).__name__ for k, s in observation_space.spaces.items() if not isinstance(s, FLAT_OBS_SPACES)}
         if bad:
             raise ValueError(
-                f"Unsupported observation space: Dict entries {bad} are not Box spaces. sb3-es flattens Dict "
-                "observations of Box entries only; wrap the env with gymnasium.wrappers.FlattenObservation."
+                f"Unsupported observation space: Dict entries {bad} are not Box, Discrete, MultiDiscrete or "
+                "MultiBinary spaces; wrap the env with gymnasium.wrappers.FlattenObservation."
             )
-        return sum(int(np.prod(s.shape)) for s in observation_space.spaces.values())  # type: ignore[arg-type, misc]
+        return sum(int(get_flattened_obs_dim(s)) for s in observation_space.spaces.values())
+    if isinstance(observation_space, FLAT_OBS_SPACES):
+        return int(get_flattened_obs_dim(observation_space))
     raise ValueError(
-        f"Unsupported observation space {observation_space}: sb3-es policies take Box observations or a Dict of "
-        "Box observations. Wrap the env with gymnasium.wrappers.FlattenObservation (Discrete, Tuple, ...) or "
-        "a TransformObservation that produces a Box."
+        f"Unsupported observation space {observation_space}: sb3-es policies take Box, Discrete, MultiDiscrete and "
+        "MultiBinary observations, or a Dict of them. Wrap the env with gymnasium.wrappers.FlattenObservation "
+        "(Tuple, ...) or a TransformObservation that produces a Box."
     )
+
+
+def _flatten_entry(obs: np.ndarray, space: spaces.Space) -> np.ndarray:
+    """
+    :param obs: A batch of observations of ``space``.
+    :param space: The space: a ``Box`` is flattened; other spaces go through SB3's ``preprocess_obs`` (one-hot).
+    :return: ``(n, flat_dim)`` observations.
+    """
+    obs = np.asarray(obs)
+    if not isinstance(space, spaces.Box):
+        obs = preprocess_obs(th.as_tensor(obs), space, normalize_images=False).numpy()  # type: ignore[union-attr]
+    return obs.reshape(obs.shape[0], -1)
 
 
 class FlatPolicy(BasePolicy):
     """
     Deterministic MLP (or linear) policy whose parameters form one flat vector.
 
-    :param observation_space: Observation space: ``Box`` or ``Dict`` of ``Box`` (flattened).
+    :param observation_space: Observation space: ``Box``, ``Discrete``, ``MultiDiscrete``, ``MultiBinary`` (one-hot,
+        as SB3's ``preprocess_obs``) or a ``Dict`` of them (flattened and concatenated).
     :param action_space: Action space: ``Box`` (continuous) or ``Discrete`` (argmax of the outputs).
     :param net_arch: Sizes of the hidden layers; ``[]`` gives a linear policy. Defaults to ``[64, 64]``.
     :param activation_fn: Activation function after each hidden layer.
@@ -193,17 +212,17 @@ class FlatPolicy(BasePolicy):
     # ------------------------------------------------------------------ observations
     def flatten_obs(self, obs: np.ndarray | dict[str, np.ndarray]) -> np.ndarray:
         """
-        Flatten a batch of observations to ``(n, obs_dim)`` float32.
+        Flatten a batch of observations to ``(n, obs_dim)`` float32 (discrete ones one-hot, as SB3 does).
 
         :param obs: Array, or dict of arrays for ``Dict`` spaces, with a leading batch dimension.
         :return: Flattened observations.
         """
-        if isinstance(self.observation_space, spaces.Dict):
+        space = self.observation_space
+        if isinstance(space, spaces.Dict):
             assert isinstance(obs, dict)
-            parts = [np.asarray(obs[key]).reshape(len(obs[key]), -1) for key in self.observation_space.spaces]
+            parts = [_flatten_entry(obs[key], subspace) for key, subspace in space.spaces.items()]
             return np.concatenate(parts, axis=1).astype(np.float32, copy=False)
-        obs = np.asarray(obs)
-        return obs.reshape(obs.shape[0], -1).astype(np.float32, copy=False)
+        return _flatten_entry(obs, space).astype(np.float32, copy=False)  # type: ignore[arg-type]
 
     def normalize(self, flat_obs: np.ndarray) -> np.ndarray:
         """

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import io
 import pathlib
+import warnings
 from abc import abstractmethod
 from typing import Any, ClassVar, TypeVar
 
@@ -82,6 +83,8 @@ class PopulationAlgorithm(ESBaseAlgorithm):
     :param seed: Seed for the strategy, the environments and torch.
     :param verbose: 0 none, 1 training information, 2 debug.
     :param device: Torch device; the CPU is the right choice for small policies.
+    :param max_episode_steps: Longest episode training runs (see :class:`~sb3_es.common.base_class.ESBaseAlgorithm`):
+        ``None`` takes the env's ``TimeLimit``, or 1000 steps with a warning for an env without one.
     :param evaluator: Who runs the candidates: ``"local"`` (the model's VecEnv, in this process), ``"ray"``
         (Ray actors, one per available CPU, building their envs from ``env``, which must then be an env id;
         see :class:`~sb3_es.evaluation.ray.RayEvaluator`) or a :class:`~sb3_es.evaluation.PopulationEvaluator`
@@ -118,12 +121,22 @@ class PopulationAlgorithm(ESBaseAlgorithm):
         verbose: int = 0,
         device: th.device | str = "cpu",
         evaluator: str | PopulationEvaluator = "local",
+        max_episode_steps: int | None = None,
         _init_setup_model: bool = True,
     ) -> None:
         # Env id, for evaluator="ray" (each Ray actor builds its envs from it); not saved.
         self._env_id = env if isinstance(env, str) else None
         super().__init__(
-            policy, env, learning_rate, policy_kwargs, stats_window_size, tensorboard_log, verbose, device, seed
+            policy,
+            env,
+            learning_rate,
+            policy_kwargs,
+            stats_window_size,
+            tensorboard_log,
+            verbose,
+            device,
+            seed,
+            max_episode_steps=max_episode_steps,
         )
         if int(n_eval_episodes) != n_eval_episodes or n_eval_episodes < 1:
             raise ValueError(f"n_eval_episodes={n_eval_episodes}: it must be a positive integer.")
@@ -274,7 +287,12 @@ class PopulationAlgorithm(ESBaseAlgorithm):
         progress_bar: bool = False,
     ) -> SelfPopulationAlgorithm:
         """
-        Train for at least ``total_timesteps`` env steps (the last generation is always completed).
+        Train for at least ``total_timesteps`` env steps.
+
+        Training stops at a generation's end: the generation during which ``num_timesteps`` reaches
+        ``total_timesteps`` is completed and applied (so the run can overshoot by up to one generation), and no
+        further one is started; nothing (strategy, observation statistics, the env's ``VecNormalize``) changes
+        after it. With ``verbose >= 1`` the size of a generation is printed at the start.
 
         :param total_timesteps: Env steps to train for.
         :param callback: Callback(s) called at every vec step; returning False stops training at once
@@ -291,6 +309,8 @@ class PopulationAlgorithm(ESBaseAlgorithm):
         )
         callback.on_training_start(locals(), globals())
         self._stop_training = False
+        if self.verbose >= 1:
+            print(self._generation_size_message(total_timesteps))
         while self.num_timesteps < total_timesteps and not self._stop_training:
             self._update_current_progress_remaining(self.num_timesteps, total_timesteps)
             if not self._run_generation(evaluator, callback):
@@ -300,6 +320,27 @@ class PopulationAlgorithm(ESBaseAlgorithm):
                 self.dump_logs(self._n_updates)
         callback.on_training_end()
         return self
+
+    def _generation_size_message(self, total_timesteps: int) -> str:
+        """
+        :param total_timesteps: The ``learn()`` target.
+        :return: What a generation costs, and where ``learn()`` stops.
+        """
+        max_steps = self.episode_step_limit()
+        size = getattr(self.strategy, "population_size", None)
+        if size is None:
+            episodes = f"its candidates x {self.n_eval_episodes} episode(s)"
+        else:
+            n = int(size) * self.n_eval_episodes
+            episodes = (
+                f"{size} candidates x {self.n_eval_episodes} episode(s) = {n} episodes, at most "
+                f"{n * max_steps} env steps"
+            )
+        return (
+            f"{type(self).__name__}: a generation evaluates {episodes} (episodes last at most {max_steps} steps; "
+            f"env slots left idle at its end run the center policy). learn() stops at the end of the generation "
+            f"during which num_timesteps reaches {total_timesteps}, so it can overshoot by up to one generation."
+        )
 
     def _run_generation(self, evaluator: PopulationEvaluator, callback: BaseCallback) -> bool:
         """
@@ -314,24 +355,49 @@ class PopulationAlgorithm(ESBaseAlgorithm):
         seed = int(self._env_rng.integers(2**31 - 1))
         callback.on_rollout_start()
 
-        def step_hook(n_envs: int, infos: list[dict[str, Any]], dones: np.ndarray) -> bool:
+        def step_hook(
+            n_envs: int, infos: list[dict[str, Any]], dones: np.ndarray, rewards: np.ndarray, new_obs: Any, actions: Any
+        ) -> bool:
             self.num_timesteps += n_envs
-            callback.update_locals({"infos": infos, "dones": dones, "n_envs": n_envs})
+            callback.update_locals(
+                {
+                    "infos": infos,
+                    "dones": dones,
+                    "n_envs": n_envs,
+                    "rewards": rewards,
+                    "new_obs": new_obs,
+                    "actions": actions,
+                }
+            )
             if not callback.on_step():
                 self._stop_training = True
             return not self._stop_training
 
         result = evaluator.evaluate(
-            self.policy, population, self.strategy.center, self.n_eval_episodes, seed, step_hook, self.reward_shaping
+            self.policy,
+            population,
+            self.strategy.center,
+            self.n_eval_episodes,
+            seed,
+            step_hook,
+            self.reward_shaping,
+            max_episode_steps=self.episode_step_limit(),
         )
         callback.on_rollout_end()
         if result.stopped:
             return False
+        stats = result.obs_stats
+        if stats.n_nonfinite and self.policy.normalize_observations:
+            warnings.warn(
+                f"{stats.n_nonfinite} of the {stats.n_nonfinite + stats.count} observations of this generation had "
+                "NaN or infinite values: they were left out of the observation statistics (check the env).",
+                stacklevel=2,
+            )
         fitness = result.fitness_returns.mean(axis=1)
         for key, value in self.strategy.tell(fitness).items():
             self.logger.record(f"train/{key}", value)
         if self.policy.normalize_observations:
-            self.policy.update_obs_rms(*result.obs_stats.moments())
+            self.policy.update_obs_rms(*stats.moments())
         self.policy.load_from_vector(self.strategy.center)
         self._record_generation(result, fitness)
         return True
@@ -343,12 +409,9 @@ class PopulationAlgorithm(ESBaseAlgorithm):
         :param result: The evaluation results.
         :param fitness: The fitness given to the strategy.
         """
-        if result.ep_infos:
-            self._update_info_buffer([{"episode": info} for info in result.ep_infos])
-        else:  # no Monitor wrapper: report what the evaluator measured
-            self._update_info_buffer(
-                [{"episode": {"r": r, "l": n}} for r, n in zip(result.returns.ravel(), result.lengths.ravel())]
-            )
+        assert self.ep_success_buffer is not None
+        self._update_info_buffer([{"episode": info} for info in result.ep_infos])
+        self.ep_success_buffer.extend(result.successes)
         self.logger.record("rollout/candidate_return_mean", float(result.returns.mean()))
         self.logger.record("rollout/candidate_return_max", float(result.returns.mean(axis=1).max()))
         self.logger.record("rollout/fitness_mean", float(fitness.mean()))

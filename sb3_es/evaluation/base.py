@@ -8,44 +8,70 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from stable_baselines3.common.running_mean_std import RunningMeanStd
 
 from sb3_es.common.policies import FlatPolicy
 from sb3_es.evaluation.shaping import RewardShaping
 from sb3_es.strategies.noise import NoiseTablePopulation
 
-#: Called once per vec step with ``(n_envs, infos, dones)``; returning False stops the evaluation.
-StepHook = Callable[[int, list[dict[str, Any]], np.ndarray], bool]
+#: Called once per vec step with ``(n_envs, infos, dones, rewards, new_obs, actions)`` (what the VecEnv's ``step``
+#: took and returned); returning False stops the evaluation. A Ray evaluator's replay passes ``None`` for ``new_obs``
+#: and ``actions``, which the actors do not send back.
+StepHook = Callable[[int, list[dict[str, Any]], np.ndarray, np.ndarray, Any, Any], bool]
 
 
-@dataclass
 class ObsStats:
     """
-    Sufficient statistics of a set of flattened observations: merging two is exact addition.
+    Mean and variance of a set of flattened observations, merged with Chan's parallel algorithm (SB3's
+    :class:`~stable_baselines3.common.running_mean_std.RunningMeanStd`, which this wraps, started from zero counts).
 
-    :param count: Number of observations.
-    :param total: Sum of the observations.
-    :param total_sq: Sum of their squares.
+    Each batch's moments are computed in two passes before the merge, so observations with a large offset
+    (``1e8`` plus small noise) keep their variance, which sums of squares lose. Merging the statistics of two
+    workers gives the statistics of the union (up to rounding, in any order). Rows with a NaN or infinite value are
+    left out and counted in :attr:`n_nonfinite`: one bad observation must not poison the statistics for ever.
+
+    :param dim: Size of a flattened observation.
     """
 
-    count: int
-    total: np.ndarray
-    total_sq: np.ndarray
+    def __init__(self, dim: int) -> None:
+        self.rms = RunningMeanStd(epsilon=0.0, shape=(dim,))
+        self.rms.var = np.zeros(dim)
+        #: Observations left out because they had a NaN or infinite value.
+        self.n_nonfinite = 0
 
     @classmethod
     def zeros(cls, dim: int) -> ObsStats:
         """:return: Empty statistics for observations of size ``dim``."""
-        return cls(0, np.zeros(dim), np.zeros(dim))
+        return cls(dim)
+
+    @property
+    def count(self) -> int:
+        """:return: Number of observations in the statistics."""
+        return int(self.rms.count)
+
+    @property
+    def mean(self) -> np.ndarray:
+        """:return: Mean of the observations (zeros when empty)."""
+        return self.rms.mean
+
+    @property
+    def var(self) -> np.ndarray:
+        """:return: Population variance of the observations (zeros when empty)."""
+        return self.rms.var
 
     def add(self, flat_obs: np.ndarray) -> None:
         """
-        Add a batch of flattened observations.
+        Add a batch of flattened observations (rows with a non-finite value are counted, not added).
 
         :param flat_obs: Observations ``(n, dim)``.
         """
         flat_obs = flat_obs.astype(np.float64, copy=False)
-        self.count += flat_obs.shape[0]
-        self.total += flat_obs.sum(axis=0)
-        self.total_sq += np.square(flat_obs).sum(axis=0)
+        finite = np.isfinite(flat_obs).all(axis=1)
+        if not finite.all():
+            self.n_nonfinite += int(np.count_nonzero(~finite))
+            flat_obs = flat_obs[finite]
+        if len(flat_obs):
+            self.rms.update(flat_obs)
 
     def merge(self, other: ObsStats) -> None:
         """
@@ -53,15 +79,13 @@ class ObsStats:
 
         :param other: Statistics to add.
         """
-        self.count += other.count
-        self.total += other.total
-        self.total_sq += other.total_sq
+        self.n_nonfinite += other.n_nonfinite
+        if other.rms.count > 0:
+            self.rms.combine(other.rms)
 
     def moments(self) -> tuple[np.ndarray, np.ndarray, int]:
         """:return: ``(mean, variance, count)`` for ``RunningMeanStd.update_from_moments``."""
-        mean = self.total / max(self.count, 1)
-        var = np.maximum(self.total_sq / max(self.count, 1) - np.square(mean), 0.0)
-        return mean, var, self.count
+        return self.mean, self.var, self.count
 
 
 @dataclass
@@ -73,7 +97,9 @@ class PopulationResult:
     :param lengths: Length of each episode, ``(n_candidates, n_episodes)``.
     :param obs_stats: Statistics of the observations the candidates saw (for observation normalization).
     :param n_steps: Env steps taken (every slot of every vec step, idle slots included).
-    :param ep_infos: Monitor ``info["episode"]`` dicts of the candidates' episodes.
+    :param ep_infos: One dict per candidate episode, in the order they ended: the Monitor's ``info["episode"]``, or
+        ``{"r": return, "l": length}`` measured by the evaluator (no Monitor, or an episode cut at the length cap).
+    :param successes: ``info["is_success"]`` at the end of the candidates' episodes, where the env reports it.
     :param center_returns: Returns of completed episodes of the center (mean) policy, run by idle slots.
     :param center_lengths: Lengths of those episodes.
     :param stopped: True when a callback stopped the evaluation: the results are then incomplete.
@@ -86,6 +112,7 @@ class PopulationResult:
     obs_stats: ObsStats
     n_steps: int = 0
     ep_infos: list[dict[str, Any]] = field(default_factory=list)
+    successes: list[bool] = field(default_factory=list)
     center_returns: list[float] = field(default_factory=list)
     center_lengths: list[int] = field(default_factory=list)
     stopped: bool = False
@@ -126,6 +153,7 @@ class PopulationEvaluator(ABC):
         seed: int,
         step_hook: StepHook | None = None,
         shaping: RewardShaping | None = None,
+        max_episode_steps: int | None = None,
     ) -> PopulationResult:
         """
         Evaluate every candidate for ``n_episodes`` episodes.
@@ -137,6 +165,8 @@ class PopulationEvaluator(ABC):
         :param seed: Seed for the environments' resets in this generation (makes runs reproducible).
         :param step_hook: Called once per vec step; returning False stops the evaluation.
         :param shaping: Per-step reward shaping of the fitness (``shaped_returns``); ``None`` for none.
+        :param max_episode_steps: End an episode that reaches this many steps as a time limit would (see
+            :func:`~sb3_es.evaluation.time_limit.end_capped_episodes`); ``None``: the env's own limit only.
         :return: The results.
         """
 

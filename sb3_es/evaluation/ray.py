@@ -12,9 +12,9 @@ What crosses the wire per generation (see ``docs/guide/ray.md``):
   the per-candidate offsets into a :class:`SharedNoiseTable` and their signed scales. Each node fetches the
   object once; the actors on a node share it (zero-copy).
 * driver -> each actor: the object's reference, the candidate index of each of its jobs, and a seed.
-* each actor -> driver: returns and lengths of its jobs, its :class:`~sb3_es.evaluation.ObsStats` (three
-  ``obs_dim`` vectors, exactly mergeable), Monitor episode infos, center-policy episodes, and the ``dones`` of
-  each vec step (a bool array, for the callback replay).
+* each actor -> driver: returns and lengths of its jobs, its :class:`~sb3_es.evaluation.ObsStats` (count, mean
+  and variance, merged with Chan's parallel algorithm), Monitor episode infos, center-policy episodes, and the
+  ``dones`` and ``rewards`` of each vec step (for the callback replay).
 
 Sent once per actor (again only if it changes or the actor is replaced): the policy class and its constructor
 parameters, and the noise table's object reference.
@@ -186,21 +186,26 @@ class _Worker:
             key, offsets, scales = payload["noise"]
             rows = noise_rows(self.noise_tables[tuple(key)], center, offsets[candidates], scales[candidates])
         dones_log: list[np.ndarray] = []
+        rewards_log: list[np.ndarray] = []
         done_infos: list[tuple[int, int, dict[str, Any]]] = []
 
-        def record(n_envs: int, infos: list[dict[str, Any]], dones: np.ndarray) -> bool:
+        def record(n_envs: int, infos: list[dict[str, Any]], dones: np.ndarray, rewards: np.ndarray, *_: Any) -> bool:
             for slot in np.flatnonzero(dones).tolist():
                 info = {k: v for k, v in infos[slot].items() if k != "terminal_observation"}
                 done_infos.append((len(dones_log), slot, info))
             dones_log.append(np.array(dones, dtype=bool))
+            rewards_log.append(np.array(rewards))
             return True
 
         start = time.perf_counter()
-        result = self.evaluator.evaluate(policy, rows, center, 1, seed, record, payload.get("shaping"), linger)
+        result = self.evaluator.evaluate(
+            policy, rows, center, 1, seed, record, payload.get("shaping"), payload.get("max_episode_steps"), linger
+        )
         eval_time = time.perf_counter() - start
         n_envs = self.env.num_envs
         dones = np.stack(dones_log) if dones_log else np.zeros((0, n_envs), dtype=bool)
-        return {"result": result, "dones": dones, "done_infos": done_infos, "eval_time": eval_time}
+        rewards = np.stack(rewards_log) if rewards_log else np.zeros((0, n_envs), dtype=np.float32)
+        return {"result": result, "dones": dones, "rewards": rewards, "done_infos": done_infos, "eval_time": eval_time}
 
     def call(self, fn: Callable[[VecEnv], Any]) -> Any:
         """:return: ``fn(vec_env)``, run in the actor."""
@@ -242,7 +247,8 @@ class RayEvaluator(PopulationEvaluator):
 
     Callbacks: remote steps cannot call the driver's callbacks, so when the results are back the step hook is
     replayed once per remote vec step (the actors' steps interleaved, with each actor's ``n_envs``, its real
-    ``dones`` and, for slots whose episode ended, its infos without ``terminal_observation``): ``num_timesteps``
+    ``dones`` and ``rewards`` and, for slots whose episode ended, its infos without ``terminal_observation``; the
+    callbacks' ``new_obs`` and ``actions`` are ``None``, as the actors do not send them back): ``num_timesteps``
     grows by exactly the env steps taken and ``on_step()`` is called once per remote vec step. A callback that
     returns False stops the replay there and the generation is discarded, as in the local engine (kept only if
     the stop came at the last replayed step); the remote work of that generation is lost, since a stop request
@@ -451,12 +457,13 @@ class RayEvaluator(PopulationEvaluator):
         seed: int,
         step_hook: StepHook | None = None,
         shaping: RewardShaping | None = None,
+        max_episode_steps: int | None = None,
     ) -> PopulationResult:
         start_time = time.perf_counter()
         self.start()
         shape = shaping is not None and not shaping.is_identity
         try:
-            outputs, shares = self._run_remote(policy, population, center, n_episodes, seed, shaping)
+            outputs, shares = self._run_remote(policy, population, center, n_episodes, seed, shaping, max_episode_steps)
         except BaseException:
             # Unfinished tasks would delay the next generation (and an interrupted run must not leave busy
             # actors behind): start afresh next time.
@@ -475,6 +482,7 @@ class RayEvaluator(PopulationEvaluator):
             result.obs_stats.merge(part.obs_stats)
             result.n_steps += part.n_steps
             result.ep_infos.extend(part.ep_infos)
+            result.successes.extend(part.successes)
             result.center_returns.extend(part.center_returns)
             result.center_lengths.extend(part.center_lengths)
         replay_start = time.perf_counter()
@@ -498,6 +506,7 @@ class RayEvaluator(PopulationEvaluator):
         n_episodes: int,
         seed: int,
         shaping: RewardShaping | None = None,
+        max_episode_steps: int | None = None,
     ) -> tuple[list[dict[str, Any]], list[np.ndarray]]:
         """Run the shares on the actors (replacing dead ones); return their outputs and job indices."""
         ray = _import_ray()
@@ -519,6 +528,7 @@ class RayEvaluator(PopulationEvaluator):
             "population": None,
             "noise": None,
             "shaping": shaping,
+            "max_episode_steps": max_episode_steps,
         }
         if isinstance(population, NoiseTablePopulation):
             payload["noise"] = (population.table.key, np.asarray(population.offsets), np.asarray(population.scales))
@@ -601,6 +611,6 @@ class RayEvaluator(PopulationEvaluator):
                 for slot, info in done_infos[k].get(t, {}).items():
                     infos[slot] = dict(info)
                 calls += 1
-                if not step_hook(len(dones), infos, dones):
+                if not step_hook(len(dones), infos, dones, output["rewards"][t], None, None):
                     return calls < total
         return False

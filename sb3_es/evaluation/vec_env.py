@@ -11,6 +11,7 @@ from stable_baselines3.common.vec_env import VecEnv
 from sb3_es.common.policies import FlatPolicy
 from sb3_es.evaluation.base import PopulationEvaluator, PopulationResult, StepHook
 from sb3_es.evaluation.shaping import RewardShaping
+from sb3_es.evaluation.time_limit import end_capped_episodes
 from sb3_es.strategies.noise import NoiseTablePopulation
 
 
@@ -40,6 +41,7 @@ class VecEnvEvaluator(PopulationEvaluator):
         seed: int,
         step_hook: StepHook | None = None,
         shaping: RewardShaping | None = None,
+        max_episode_steps: int | None = None,
         linger: Callable[[], bool] | None = None,
     ) -> PopulationResult:
         """
@@ -88,6 +90,7 @@ class VecEnvEvaluator(PopulationEvaluator):
             result.n_steps += n_envs
             ep_return += rewards
             ep_length += 1
+            end_capped_episodes(env, max_episode_steps, ep_length, obs, dones, infos)  # type: ignore[arg-type]
             if shape:
                 assert shaping is not None
                 ep_shaped += shaping(rewards, dones, infos)
@@ -102,13 +105,16 @@ class VecEnvEvaluator(PopulationEvaluator):
                     if shaped_returns is not None:
                         shaped_returns[job] = ep_shaped[slot]
                     remaining -= 1
-                    if "episode" in infos[slot]:
-                        result.ep_infos.append(infos[slot]["episode"])
+                    # The Monitor's episode info, or what was measured here (no Monitor, or an episode cut here).
+                    episode = infos[slot].get("episode", {"r": float(ep_return[slot]), "l": int(ep_length[slot])})
+                    result.ep_infos.append(episode)
+                    if infos[slot].get("is_success") is not None:
+                        result.successes.append(bool(infos[slot]["is_success"]))
                 ep_return[slot] = 0.0
                 ep_length[slot] = 0
                 ep_shaped[slot] = 0.0
                 assign(slot)
-            if step_hook is not None and not step_hook(n_envs, infos, dones):
+            if step_hook is not None and not step_hook(n_envs, infos, dones, rewards, obs, actions):
                 result.stopped = remaining > 0
                 break
         return result

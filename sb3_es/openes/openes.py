@@ -66,6 +66,8 @@ class OpenES(PopulationAlgorithm):
     :param noise_table_size: Read perturbations from a shared noise table of this many float32 values (e.g.
         ``2**24``) instead of drawing them fresh, so that a Ray evaluator sends an offset per candidate
         rather than a parameter vector. ``None`` (default) draws them fresh.
+    :param max_episode_steps: Longest episode training runs, in env steps (an episode reaching it is truncated);
+        ``None``: the env's ``TimeLimit``, or 1000 steps, with a warning, for an env without one.
     :param _init_setup_model: Whether to build the model at construction.
     """
 
@@ -104,6 +106,7 @@ class OpenES(PopulationAlgorithm):
         device: th.device | str = "cpu",
         evaluator: str | PopulationEvaluator = "local",
         noise_table_size: int | None = None,
+        max_episode_steps: int | None = None,
         _init_setup_model: bool = True,
     ) -> None:
         check_positive("sigma", sigma)
@@ -139,6 +142,7 @@ class OpenES(PopulationAlgorithm):
             verbose=verbose,
             device=device,
             evaluator=evaluator,
+            max_episode_steps=max_episode_steps,
         )
         self.population_size = population_size
         self.sigma = sigma

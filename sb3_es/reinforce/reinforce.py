@@ -17,6 +17,7 @@ from torch.nn import functional as F
 
 from sb3_es.common.base_class import ESBaseAlgorithm
 from sb3_es.common.checks import check_positive
+from sb3_es.evaluation.time_limit import end_capped_episodes
 from sb3_es.reinforce.legacy import upgrade_legacy_optimizer_state
 from sb3_es.reinforce.policies import DiscretizedPolicy, MlpPolicy, MultiInputPolicy, check_action_space
 
@@ -112,6 +113,8 @@ class REINFORCE(ESBaseAlgorithm):
     :param seed: Seed for the policy initialization, the environments and the action sampling.
     :param verbose: 0 none, 1 training information, 2 debug.
     :param device: Torch device (``"auto"``: CUDA if available). Small MLPs run best on the CPU.
+    :param max_episode_steps: Longest episode training runs, in env steps (an episode reaching it is truncated);
+        ``None``: the env's ``TimeLimit``, or 1000 steps, with a warning, for an env without one.
     :param _init_setup_model: Whether to build the model at construction.
     """
 
@@ -138,6 +141,7 @@ class REINFORCE(ESBaseAlgorithm):
         seed: int | None = None,
         verbose: int = 0,
         device: th.device | str = "auto",
+        max_episode_steps: int | None = None,
         _init_setup_model: bool = True,
     ) -> None:
         if int(n_episodes) != n_episodes or n_episodes < 1:
@@ -154,7 +158,16 @@ class REINFORCE(ESBaseAlgorithm):
         if env is not None and not isinstance(env, str) and hasattr(env, "action_space"):
             check_action_space(env.action_space)
         super().__init__(
-            policy, env, learning_rate, policy_kwargs, stats_window_size, tensorboard_log, verbose, device, seed
+            policy,
+            env,
+            learning_rate,
+            policy_kwargs,
+            stats_window_size,
+            tensorboard_log,
+            verbose,
+            device,
+            seed,
+            max_episode_steps=max_episode_steps,
         )
         if self.env is not None:
             check_action_space(self.action_space)
@@ -207,7 +220,11 @@ class REINFORCE(ESBaseAlgorithm):
         progress_bar: bool = False,
     ) -> SelfREINFORCE:
         """
-        Train for at least ``total_timesteps`` env steps (the last update always completes its episodes).
+        Train for at least ``total_timesteps`` env steps.
+
+        Training stops at an update's end: the update during which ``num_timesteps`` reaches ``total_timesteps``
+        completes its episodes and is applied (so the run can overshoot by up to one update), and no further one
+        is started. With ``verbose >= 1`` the size of an update is printed at the start.
 
         :param total_timesteps: Env steps to train for.
         :param callback: Callback(s) called at every vec step; returning False stops training at once
@@ -231,6 +248,14 @@ class REINFORCE(ESBaseAlgorithm):
                 "and their steps are wasted (they still count in num_timesteps).",
                 stacklevel=2,
             )
+        if self.verbose >= 1:
+            max_steps = self.episode_step_limit()
+            print(
+                f"REINFORCE: an update collects {self.n_episodes} episodes of at most {max_steps} steps (up to "
+                f"{self.n_episodes * max_steps} kept env steps, plus the steps of env slots done with their share). "
+                f"learn() stops at the end of the update during which num_timesteps reaches {total_timesteps}, so "
+                "it can overshoot by up to one update."
+            )
         while self.num_timesteps < total_timesteps:
             batch = self.collect_episodes(self.env, callback)
             if batch is None:
@@ -253,6 +278,7 @@ class REINFORCE(ESBaseAlgorithm):
         """
         assert self._rng is not None
         n_envs = env.num_envs
+        max_steps = self.episode_step_limit()
         quotas = np.array([self.n_episodes // n_envs + (i < self.n_episodes % n_envs) for i in range(n_envs)])
         env_seed, sample_seed = (int(s) for s in self._rng.integers(2**31 - 1 - n_envs, size=2))
         generator = th.Generator(device=self.device)
@@ -277,6 +303,7 @@ class REINFORCE(ESBaseAlgorithm):
                 actions = self.policy.indices_to_actions(indices).cpu().numpy()
             actions = actions.reshape((n_envs, *self.action_space.shape))  # type: ignore[misc]
             new_obs, rewards, dones, infos = env.step(actions)
+            end_capped_episodes(env, max_steps, ep_length + 1, new_obs, dones, infos)  # type: ignore[arg-type]
             self.num_timesteps += n_envs
             callback.update_locals(locals())
             if not callback.on_step():

@@ -1,0 +1,76 @@
+"""Episode length caps: read a VecEnv's time limit, and end an episode that reaches a cap as ``TimeLimit`` would."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from gymnasium.wrappers import TimeLimit
+from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
+
+
+def env_time_limit(env: VecEnv) -> int | None:
+    """
+    The episode length limit of a VecEnv's envs (gymnasium's ``TimeLimit`` wrapper).
+
+    :param env: The VecEnv.
+    :return: The largest ``max_episode_steps`` over the env slots, or ``None`` if a slot has no ``TimeLimit``.
+    """
+    try:
+        if not all(env.env_is_wrapped(TimeLimit)):
+            return None
+        return max(int(limit) for limit in env.get_attr("_max_episode_steps"))
+    except (AttributeError, NotImplementedError, TypeError, ValueError):  # a VecEnv that cannot tell
+        return None
+
+
+def end_capped_episodes(
+    env: VecEnv,
+    max_episode_steps: int | None,
+    lengths: np.ndarray,
+    new_obs: np.ndarray | dict[str, np.ndarray],
+    dones: np.ndarray,
+    infos: list[dict[str, Any]],
+) -> None:
+    """
+    End the episodes that reached ``max_episode_steps`` steps without ending, as a ``TimeLimit`` inside the VecEnv
+    would have: the slot's ``done`` is set, its info gets ``TimeLimit.truncated`` and ``terminal_observation``, and
+    the slot is reset (``env_method("reset")``) with its first observation written into ``new_obs``. Arguments are
+    changed in place, right after ``env.step()`` and before they are used.
+
+    A single slot can be reset only on a VecEnv that is not a ``VecEnvWrapper`` (a ``VecNormalize`` or
+    ``VecFrameStack`` would not see the reset): there, reaching the cap raises an error that says to give each env
+    a ``TimeLimit``.
+
+    :param env: The VecEnv just stepped.
+    :param max_episode_steps: The cap (``None``: none).
+    :param lengths: Length of each slot's current episode, this step included.
+    :param new_obs: Observations returned by the step.
+    :param dones: Dones returned by the step.
+    :param infos: Infos returned by the step.
+    """
+    if max_episode_steps is None:
+        return
+    slots = np.flatnonzero((lengths >= max_episode_steps) & ~np.asarray(dones, dtype=bool))
+    if len(slots) == 0:
+        return
+    if isinstance(env, VecEnvWrapper):
+        raise RuntimeError(
+            f"An episode reached max_episode_steps={max_episode_steps} steps without ending, and the env's episodes "
+            f"cannot be cut one slot at a time through {type(env).__name__} (the VecEnv wrapper would not see the "
+            "reset). Give each env a time limit before wrapping the VecEnv, e.g. make_vec_env(env_id, "
+            "wrapper_class=gymnasium.wrappers.TimeLimit, wrapper_kwargs=dict(max_episode_steps=1000))."
+        )
+    resets = env.env_method("reset", indices=slots.tolist())
+    for slot, (first_obs, _) in zip(slots.tolist(), resets):
+        terminal: Any
+        if isinstance(new_obs, dict):
+            terminal = {key: np.array(value[slot]) for key, value in new_obs.items()}
+            for key, value in new_obs.items():
+                value[slot] = first_obs[key]
+        else:
+            terminal = np.array(new_obs[slot])
+            new_obs[slot] = first_obs
+        dones[slot] = True
+        infos[slot]["TimeLimit.truncated"] = True
+        infos[slot]["terminal_observation"] = terminal
