@@ -146,7 +146,9 @@ class ESBaseAlgorithm(BaseAlgorithm):
         # The last generation or update may end past total_timesteps: the progress stops at 0.
         super()._update_current_progress_remaining(min(num_timesteps, total_timesteps), total_timesteps)
         progress = self._current_progress_remaining
-        check_scheduled_value("learning_rate", self.lr_schedule(progress), progress)
+        lr_schedule = getattr(self, "lr_schedule", None)  # population algorithms check their schedules in _ask
+        if lr_schedule is not None:
+            check_scheduled_value("learning_rate", lr_schedule(progress), progress)
 
     def dump_logs(self, iteration: int = 0) -> None:
         """
