@@ -153,20 +153,20 @@ def test_nan_rewards_after_training_leave_last_update() -> None:
     ("algorithm", "kwargs", "updates_before"),
     [
         # A generation (ARS, OpenES) or an update (REINFORCE, one episode) is 400 or 200 Pendulum steps.
-        (ARS, dict(policy="LinearPolicy", n_delta=1), 3),
-        (OpenES, dict(policy="LinearPolicy", population_size=2), 3),
-        (REINFORCE, dict(policy="MlpPolicy", n_episodes=1), 2),
+        (ARS, dict(policy="LinearPolicy", n_delta=1), 2),
+        (OpenES, dict(policy="LinearPolicy", population_size=2), 2),
+        (REINFORCE, dict(policy="MlpPolicy", n_episodes=1), 1),
     ],
 )
 def test_learning_rate_schedule_going_negative_during_training(algorithm, kwargs, updates_before: int) -> None:
     """
-    ``progress - 0.5`` starts positive. ARS and OpenES check it before each generation (progress 1, 0.75,
-    0.5, 0.25: the fourth is refused), REINFORCE after collecting each update's episodes (progress 0.75,
-    0.5, 0.25: the third is refused). A schedule that ends at 0 is fine.
+    ``progress - 0.6`` starts positive. ARS and OpenES check it before each generation (progress 1, 0.75,
+    0.5: the third is refused), REINFORCE after collecting each update's episodes (progress 0.75, 0.5: the
+    second is refused).
     """
     steps = 400 if algorithm is not REINFORCE else 200
-    model = algorithm(env="Pendulum-v1", learning_rate=lambda progress: progress - 0.5, seed=0, **kwargs)
-    with pytest.raises(ValueError, match=r"learning_rate schedule gave -0.25 at progress_remaining=0.25.*>= 0"):
+    model = algorithm(env="Pendulum-v1", learning_rate=lambda progress: progress - 0.6, seed=0, **kwargs)
+    with pytest.raises(ValueError, match=r"learning_rate schedule gave -0.1 at progress_remaining=0.5: it must stay"):
         model.learn(4 * steps)
     assert model._n_updates == updates_before
     for param in model.policy.parameters():
