@@ -249,15 +249,15 @@ def test_set_parameters_refuses_another_algorithms_zip(tmp_path: Path) -> None:
     np.testing.assert_array_equal(model.strategy.center, model.policy.parameters_to_vector())
 
 
-def garble_lr_schedule(path: Path) -> Path:
-    """Copy of a save whose ``lr_schedule`` names a function that no longer exists (as after a refactoring)."""
+def garble_action_space(path: Path) -> Path:
+    """Copy of a save whose ``action_space`` names a class that no longer exists (as after a library update)."""
     garbled = path.with_name("garbled.zip")
     with zipfile.ZipFile(path) as source, zipfile.ZipFile(garbled, "w") as target:
         for item in source.infolist():
             content = source.read(item)
             if item.filename == "data":
                 data = json.loads(content)
-                data["lr_schedule"][":serialized:"] = base64.b64encode(b"csb3_es\nremoved_schedule\n.").decode()
+                data["action_space"][":serialized:"] = base64.b64encode(b"cgymnasium.spaces\nRemovedBox\n.").decode()
                 content = json.dumps(data).encode()
             target.writestr(item, content)
     return garbled
@@ -268,12 +268,12 @@ def test_load_with_custom_objects_does_not_warn(tmp_path: Path, algorithm) -> No
     policy = "MlpPolicy" if algorithm is REINFORCE else "LinearPolicy"
     original = algorithm(policy, "Pendulum-v1", seed=0)
     original.save(tmp_path / "model.zip")
-    garbled = garble_lr_schedule(tmp_path / "model.zip")
-    with pytest.warns(UserWarning, match="Could not deserialize object lr_schedule"):
-        algorithm.load(garbled)
+    garbled = garble_action_space(tmp_path / "model.zip")
+    with pytest.warns(UserWarning, match="Could not deserialize object action_space"), pytest.raises(KeyError):
+        algorithm.load(garbled)  # SB3 needs the action space
     with warnings.catch_warnings():
         warnings.filterwarnings("error", message="Could not deserialize")
-        model = algorithm.load(garbled, custom_objects={"lr_schedule": lambda _: 0.5})
+        model = algorithm.load(garbled, custom_objects={"action_space": original.action_space})
     obs = np.zeros((4, 3), dtype=np.float32)
     np.testing.assert_array_equal(
         model.predict(obs, deterministic=True)[0], original.predict(obs, deterministic=True)[0]
