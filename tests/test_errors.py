@@ -153,20 +153,20 @@ def test_nan_rewards_after_training_leave_last_update() -> None:
     ("algorithm", "kwargs", "updates_before"),
     [
         # A generation (ARS, OpenES) or an update (REINFORCE, one episode) is 400 or 200 Pendulum steps.
-        (ARS, dict(policy="LinearPolicy", n_delta=1), 3),
-        (OpenES, dict(policy="LinearPolicy", population_size=2), 3),
-        (REINFORCE, dict(policy="MlpPolicy", n_episodes=1), 2),
+        (ARS, dict(policy="LinearPolicy", n_delta=1), 2),
+        (OpenES, dict(policy="LinearPolicy", population_size=2), 2),
+        (REINFORCE, dict(policy="MlpPolicy", n_episodes=1), 1),
     ],
 )
 def test_learning_rate_schedule_going_negative_during_training(algorithm, kwargs, updates_before: int) -> None:
     """
-    ``progress - 0.5`` starts positive. ARS and OpenES check it before each generation (progress 1, 0.75,
-    0.5, 0.25: the fourth is refused), REINFORCE after collecting each update's episodes (progress 0.75,
-    0.5, 0.25: the third is refused). A schedule that ends at 0 is fine.
+    ``progress - 0.6`` starts positive. ARS and OpenES check it before each generation (progress 1, 0.75,
+    0.5: the third is refused), REINFORCE after collecting each update's episodes (progress 0.75, 0.5: the
+    second is refused).
     """
     steps = 400 if algorithm is not REINFORCE else 200
-    model = algorithm(env="Pendulum-v1", learning_rate=lambda progress: progress - 0.5, seed=0, **kwargs)
-    with pytest.raises(ValueError, match=r"learning_rate schedule gave -0.25 at progress_remaining=0.25.*>= 0"):
+    model = algorithm(env="Pendulum-v1", learning_rate=lambda progress: progress - 0.6, seed=0, **kwargs)
+    with pytest.raises(ValueError, match=r"learning_rate schedule gave -0.1 at progress_remaining=0.5: it must stay"):
         model.learn(4 * steps)
     assert model._n_updates == updates_before
     for param in model.policy.parameters():
@@ -249,15 +249,15 @@ def test_set_parameters_refuses_another_algorithms_zip(tmp_path: Path) -> None:
     np.testing.assert_array_equal(model.strategy.center, model.policy.parameters_to_vector())
 
 
-def garble_lr_schedule(path: Path) -> Path:
-    """Copy of a save whose ``lr_schedule`` names a function that no longer exists (as after a refactoring)."""
+def garble_action_space(path: Path) -> Path:
+    """Copy of a save whose ``action_space`` names a class that no longer exists (as after a library update)."""
     garbled = path.with_name("garbled.zip")
     with zipfile.ZipFile(path) as source, zipfile.ZipFile(garbled, "w") as target:
         for item in source.infolist():
             content = source.read(item)
             if item.filename == "data":
                 data = json.loads(content)
-                data["lr_schedule"][":serialized:"] = base64.b64encode(b"csb3_es\nremoved_schedule\n.").decode()
+                data["action_space"][":serialized:"] = base64.b64encode(b"cgymnasium.spaces\nRemovedBox\n.").decode()
                 content = json.dumps(data).encode()
             target.writestr(item, content)
     return garbled
@@ -268,12 +268,12 @@ def test_load_with_custom_objects_does_not_warn(tmp_path: Path, algorithm) -> No
     policy = "MlpPolicy" if algorithm is REINFORCE else "LinearPolicy"
     original = algorithm(policy, "Pendulum-v1", seed=0)
     original.save(tmp_path / "model.zip")
-    garbled = garble_lr_schedule(tmp_path / "model.zip")
-    with pytest.warns(UserWarning, match="Could not deserialize object lr_schedule"):
-        algorithm.load(garbled)
+    garbled = garble_action_space(tmp_path / "model.zip")
+    with pytest.warns(UserWarning, match="Could not deserialize object action_space"), pytest.raises(KeyError):
+        algorithm.load(garbled)  # SB3 needs the action space
     with warnings.catch_warnings():
         warnings.filterwarnings("error", message="Could not deserialize")
-        model = algorithm.load(garbled, custom_objects={"lr_schedule": lambda _: 0.5})
+        model = algorithm.load(garbled, custom_objects={"action_space": original.action_space})
     obs = np.zeros((4, 3), dtype=np.float32)
     np.testing.assert_array_equal(
         model.predict(obs, deterministic=True)[0], original.predict(obs, deterministic=True)[0]

@@ -1,5 +1,5 @@
 """What every sb3-es algorithm adds to SB3's ``BaseAlgorithm``: alias resolution, a name in the save, safe load,
-checked schedules and SB3's on-policy logging."""
+episodes that end and SB3's on-policy logging."""
 
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ from stable_baselines3.common.on_policy_algorithm import OnPolicyAlgorithm
 from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, Schedule, TensorDict
 
-from sb3_es.common.checks import check_scheduled_value, check_seed
+from sb3_es.common.checks import check_seed
 from sb3_es.common.save_util import check_save_file
 from sb3_es.evaluation.time_limit import env_time_limit
 
@@ -39,7 +39,6 @@ class ESBaseAlgorithm(BaseAlgorithm):
     - ``load()`` and ``set_parameters(path)`` first check the file
       (:func:`~sb3_es.common.save_util.check_save_file`) and raise ``ValueError`` for a corrupt file or
       another algorithm's save; subclasses check their own state in :meth:`_check_save_data`.
-    - The learning-rate schedule is checked whenever the progress moves (every generation or update).
     - ``dump_logs`` is SB3's ``OnPolicyAlgorithm.dump_logs`` (``rollout/`` and ``time/`` keys).
     - Every episode ends, so that ``learn()`` returns: an env given by its id that has no time limit is wrapped in
       gymnasium's ``TimeLimit``, and the evaluation cuts any episode at :meth:`episode_step_limit` steps.
@@ -141,14 +140,6 @@ class ESBaseAlgorithm(BaseAlgorithm):
         :param path: The file, for error messages.
         :param data: The save's data dictionary.
         """
-
-    def _update_current_progress_remaining(self, num_timesteps: int, total_timesteps: int) -> None:
-        # The last generation or update may end past total_timesteps: the progress stops at 0.
-        super()._update_current_progress_remaining(min(num_timesteps, total_timesteps), total_timesteps)
-        progress = self._current_progress_remaining
-        lr_schedule = getattr(self, "lr_schedule", None)  # population algorithms check their schedules in _ask
-        if lr_schedule is not None:
-            check_scheduled_value("learning_rate", lr_schedule(progress), progress)
 
     def dump_logs(self, iteration: int = 0) -> None:
         """

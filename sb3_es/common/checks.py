@@ -20,19 +20,21 @@ def check_positive(name: str, value: float | Schedule) -> None:
         raise ValueError(f"{name}={start}: it must be a positive number (got {value!r}).")
 
 
-def check_scheduled_value(name: str, value: float, progress_remaining: float) -> None:
+def check_scheduled_value(name: str, value: float, progress_remaining: float, allow_zero: bool = False) -> None:
     """
-    Raise a clear error when a schedule gives a negative or non-finite value during training.
+    Raise a clear error when a schedule gives a non-positive (or negative) or non-finite value during training.
 
     :param name: Hyperparameter name, for the message.
     :param value: The schedule's value now.
     :param progress_remaining: SB3's progress remaining (1 to 0) at which it was evaluated.
+    :param allow_zero: Accept 0 (a learning rate that ends at 0 with the training).
     """
-    if not (np.isfinite(value) and value >= 0):
+    if not (np.isfinite(value) and (value >= 0 if allow_zero else value > 0)):
+        bound = ">= 0" if allow_zero else "> 0"
         raise ValueError(
-            f"The {name} schedule gave {value} at progress_remaining={progress_remaining:.4g}: it must stay "
-            f">= 0 for all of training (a negative {name} steps downhill). Fix the schedule, e.g. clip it: "
-            "lambda progress: max(0.0, schedule(progress))."
+            f"The {name} schedule gave {value:.6g} at progress_remaining={progress_remaining:.4g}: it must stay "
+            f"{bound} for all of training (a negative step size steps downhill). Fix the schedule, e.g. clip it: "
+            "lambda progress: max(1e-6, schedule(progress))."
         )
 
 

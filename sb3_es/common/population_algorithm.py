@@ -15,7 +15,7 @@ from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
 
 from sb3_es.common.base_class import ESBaseAlgorithm
-from sb3_es.common.checks import check_positive
+from sb3_es.common.checks import check_positive, check_scheduled_value
 from sb3_es.common.policies import FlatPolicy, LinearPolicy, MlpPolicy
 from sb3_es.evaluation import PopulationEvaluator, PopulationResult, RewardShaping, VecEnvEvaluator
 from sb3_es.strategies import Strategy
@@ -211,7 +211,7 @@ class PopulationAlgorithm(ESBaseAlgorithm):
             schedule = getattr(self, name)
             if callable(schedule):
                 value = float(schedule(self._current_progress_remaining))
-                check_positive(name, value)
+                check_scheduled_value(name, value, self._current_progress_remaining)
                 setattr(self.strategy, name, value)
         return self.strategy.ask()
 

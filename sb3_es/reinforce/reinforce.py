@@ -16,7 +16,7 @@ from stable_baselines3.common.vec_env import VecEnv
 from torch.nn import functional as F
 
 from sb3_es.common.base_class import ESBaseAlgorithm
-from sb3_es.common.checks import check_positive
+from sb3_es.common.checks import check_positive, check_scheduled_value
 from sb3_es.evaluation.time_limit import end_capped_episodes
 from sb3_es.reinforce.legacy import upgrade_legacy_optimizer_state
 from sb3_es.reinforce.policies import DiscretizedPolicy, MlpPolicy, MultiInputPolicy, check_action_space
@@ -261,7 +261,11 @@ class REINFORCE(ESBaseAlgorithm):
             if batch is None:
                 break
             iteration += 1
-            self._update_current_progress_remaining(self.num_timesteps, total_timesteps)
+            # The last update may end past total_timesteps: the progress stops at 0 (a learning rate schedule
+            # that ends at 0 gives 0, not a negative step).
+            self._update_current_progress_remaining(min(self.num_timesteps, total_timesteps), total_timesteps)
+            progress = self._current_progress_remaining
+            check_scheduled_value("learning_rate", self.lr_schedule(progress), progress, allow_zero=True)
             self.train(batch)
             if log_interval is not None and iteration % log_interval == 0:
                 self.dump_logs(iteration)
