@@ -146,7 +146,8 @@ class ESBaseAlgorithm(BaseAlgorithm):
         # The last generation or update may end past total_timesteps: the progress stops at 0.
         super()._update_current_progress_remaining(min(num_timesteps, total_timesteps), total_timesteps)
         progress = self._current_progress_remaining
-        check_scheduled_value("learning_rate", self.lr_schedule(progress), progress)
+        if getattr(self, "lr_schedule", None) is not None:  # algorithms without a learning rate have none
+            check_scheduled_value("learning_rate", self.lr_schedule(progress), progress)
 
     def dump_logs(self, iteration: int = 0) -> None:
         """

@@ -20,19 +20,26 @@ def check_positive(name: str, value: float | Schedule) -> None:
         raise ValueError(f"{name}={start}: it must be a positive number (got {value!r}).")
 
 
-def check_scheduled_value(name: str, value: float, progress_remaining: float) -> None:
+def check_scheduled_value(name: str, value: float, progress_remaining: float, allow_zero: bool = True) -> None:
     """
     Raise a clear error when a schedule gives a negative or non-finite value during training.
 
     :param name: Hyperparameter name, for the message.
     :param value: The schedule's value now.
     :param progress_remaining: SB3's progress remaining (1 to 0) at which it was evaluated.
+    :param allow_zero: Whether 0 is valid (a step size of 0 makes no update; a noise scale of 0 is not valid).
     """
-    if not (np.isfinite(value) and value >= 0):
+    if allow_zero and not (np.isfinite(value) and value >= 0):
         raise ValueError(
             f"The {name} schedule gave {value} at progress_remaining={progress_remaining:.4g}: it must stay "
             f">= 0 for all of training (a negative {name} steps downhill). Fix the schedule, e.g. clip it: "
             "lambda progress: max(0.0, schedule(progress))."
+        )
+    if not allow_zero and not (np.isfinite(value) and value > 0):
+        raise ValueError(
+            f"The {name} schedule gave {value} at progress_remaining={progress_remaining:.4g}: it must stay "
+            f"> 0 for all of training ({name} is the scale of the exploration noise). Fix the schedule, e.g. "
+            "floor it: lambda progress: max(0.01, schedule(progress))."
         )
 
 

@@ -15,7 +15,7 @@ from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
 
 from sb3_es.common.base_class import ESBaseAlgorithm
-from sb3_es.common.checks import check_positive
+from sb3_es.common.checks import check_positive, check_scheduled_value
 from sb3_es.common.policies import FlatPolicy, LinearPolicy, MlpPolicy
 from sb3_es.evaluation import PopulationEvaluator, PopulationResult, RewardShaping, VecEnvEvaluator
 from sb3_es.strategies import Strategy
@@ -163,6 +163,8 @@ class PopulationAlgorithm(ESBaseAlgorithm):
 
     # ------------------------------------------------------------------ model
     def _setup_model(self) -> None:
+        if self.learning_rate is not None:
+            self._setup_lr_schedule()  # SB3's lr_schedule, checked at every generation (ESBaseAlgorithm)
         self.set_random_seed(self.seed)
         policy = self.policy_class(self.observation_space, self.action_space, **self.policy_kwargs)
         if not isinstance(policy, FlatPolicy):
@@ -207,11 +209,13 @@ class PopulationAlgorithm(ESBaseAlgorithm):
         :return: The candidates ``(population_size, num_params)``.
         """
         assert self.strategy is not None
+        progress = self._current_progress_remaining
         for name in self.scheduled_hyperparameters:
             schedule = getattr(self, name)
             if callable(schedule):
-                value = float(schedule(self._current_progress_remaining))
-                check_positive(name, value)
+                value = float(schedule(progress))
+                # A step size may reach 0 (no update); a noise scale (sigma, delta_std) must stay positive.
+                check_scheduled_value(name, value, progress, allow_zero=name == "learning_rate")
                 setattr(self.strategy, name, value)
         return self.strategy.ask()
 
