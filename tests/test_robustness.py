@@ -22,13 +22,13 @@ from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.preprocessing import preprocess_obs
 from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
-from sb3_es import ARS, CMAES, REINFORCE, OpenES
+from sb3_es import ARS, CMAES, PGPE, REINFORCE, OpenES, SimpleES
 from sb3_es.common.base_class import DEFAULT_MAX_EPISODE_STEPS
 from sb3_es.common.policies import MlpPolicy
 from sb3_es.evaluation import ObsStats
 
-ALGOS = ["ARS", "OpenES", "CMAES", "REINFORCE"]
-POPULATION_ALGOS = ["ARS", "OpenES", "CMAES"]
+ALGOS = ["ARS", "OpenES", "CMAES", "PGPE", "SimpleES", "REINFORCE"]
+POPULATION_ALGOS = ["ARS", "OpenES", "CMAES", "PGPE", "SimpleES"]
 
 
 def make_model(name: str, env: Any, **kwargs: Any) -> BaseAlgorithm:
@@ -40,6 +40,10 @@ def make_model(name: str, env: Any, **kwargs: Any) -> BaseAlgorithm:
         return OpenES("MlpPolicy", env, population_size=4, seed=0, policy_kwargs=policy_kwargs, **kwargs)
     if name == "CMAES":
         return CMAES("MlpPolicy", env, population_size=4, seed=0, policy_kwargs=policy_kwargs, **kwargs)
+    if name == "PGPE":
+        return PGPE("MlpPolicy", env, population_size=4, seed=0, policy_kwargs=policy_kwargs, **kwargs)
+    if name == "SimpleES":
+        return SimpleES("MlpPolicy", env, population_size=4, seed=0, policy_kwargs=policy_kwargs, **kwargs)
     return REINFORCE("MlpPolicy", env, n_episodes=2, seed=0, policy_kwargs=policy_kwargs, **kwargs)
 
 

@@ -36,6 +36,12 @@ def check_scheduled_value(name: str, value: float, progress_remaining: float, al
             f"{bound} for all of training (a negative step size steps downhill). Fix the schedule, e.g. clip it: "
             "lambda progress: max(1e-6, schedule(progress))."
         )
+    if not allow_zero and not (np.isfinite(value) and value > 0):
+        raise ValueError(
+            f"The {name} schedule gave {value} at progress_remaining={progress_remaining:.4g}: it must stay "
+            f"> 0 for all of training ({name} is the scale of the exploration noise). Fix the schedule, e.g. "
+            "floor it: lambda progress: max(0.01, schedule(progress))."
+        )
 
 
 def check_non_negative(name: str, value: float, integer: bool = False) -> None:

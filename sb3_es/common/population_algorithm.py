@@ -163,6 +163,8 @@ class PopulationAlgorithm(ESBaseAlgorithm):
 
     # ------------------------------------------------------------------ model
     def _setup_model(self) -> None:
+        if self.learning_rate is not None:
+            self._setup_lr_schedule()  # SB3's lr_schedule, checked at every generation (ESBaseAlgorithm)
         self.set_random_seed(self.seed)
         policy = self.policy_class(self.observation_space, self.action_space, **self.policy_kwargs)
         if not isinstance(policy, FlatPolicy):
@@ -207,11 +209,13 @@ class PopulationAlgorithm(ESBaseAlgorithm):
         :return: The candidates ``(population_size, num_params)``.
         """
         assert self.strategy is not None
+        progress = self._current_progress_remaining
         for name in self.scheduled_hyperparameters:
             schedule = getattr(self, name)
             if callable(schedule):
-                value = float(schedule(self._current_progress_remaining))
-                check_scheduled_value(name, value, self._current_progress_remaining)
+                value = float(schedule(progress))
+                # A step size may reach 0 (no update); a noise scale (sigma, delta_std) must stay positive.
+                check_scheduled_value(name, value, progress, allow_zero=name == "learning_rate")
                 setattr(self.strategy, name, value)
         return self.strategy.ask()
 

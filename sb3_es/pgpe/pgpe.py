@@ -52,6 +52,8 @@ class PGPE(PopulationAlgorithm):
     :param verbose: Verbosity.
     :param device: Torch device.
     :param evaluator: ``"local"`` or a :class:`~sb3_es.evaluation.PopulationEvaluator` (e.g. Ray); not saved.
+    :param max_episode_steps: Longest episode training runs, in env steps (an episode reaching it is truncated);
+        ``None``: the env's ``TimeLimit``, or 1000 steps, with a warning, for an env without one.
     :param _init_setup_model: Whether to build the model at construction.
     """
 
@@ -85,6 +87,7 @@ class PGPE(PopulationAlgorithm):
         verbose: int = 0,
         device: th.device | str = "cpu",
         evaluator: str | PopulationEvaluator = "local",
+        max_episode_steps: int | None = None,
         _init_setup_model: bool = True,
     ) -> None:
         for name, value in (("max_speed", max_speed), ("center_learning_rate", center_learning_rate)):
@@ -110,6 +113,7 @@ class PGPE(PopulationAlgorithm):
             verbose=verbose,
             device=device,
             evaluator=evaluator,
+            max_episode_steps=max_episode_steps,
         )
         self.population_size = population_size
         self.stdev_init = stdev_init

@@ -52,6 +52,8 @@ class SimpleES(PopulationAlgorithm):
     :param evaluator: ``"local"`` or a :class:`~sb3_es.evaluation.PopulationEvaluator` (e.g. Ray); not saved.
     :param noise_table_size: Read perturbations from a shared noise table of this many float32 values instead of
         drawing them fresh (a Ray evaluator then sends an offset per candidate). ``None`` (default) draws them fresh.
+    :param max_episode_steps: Longest episode training runs, in env steps (an episode reaching it is truncated);
+        ``None``: the env's ``TimeLimit``, or 1000 steps, with a warning, for an env without one.
     :param _init_setup_model: Whether to build the model at construction.
     """
 
@@ -79,6 +81,7 @@ class SimpleES(PopulationAlgorithm):
         device: th.device | str = "cpu",
         evaluator: str | PopulationEvaluator = "local",
         noise_table_size: int | None = None,
+        max_episode_steps: int | None = None,
         _init_setup_model: bool = True,
     ) -> None:
         check_positive("sigma", sigma)
@@ -99,6 +102,7 @@ class SimpleES(PopulationAlgorithm):
             verbose=verbose,
             device=device,
             evaluator=evaluator,
+            max_episode_steps=max_episode_steps,
         )
         self.population_size = population_size
         self.sigma = sigma
