@@ -17,7 +17,16 @@ def env_time_limit(env: VecEnv) -> int | None:
     :return: The largest ``max_episode_steps`` over the env slots, or ``None`` if a slot has no ``TimeLimit``.
     """
     try:
-        if not all(env.env_is_wrapped(TimeLimit)):
+        wrapped = env.env_is_wrapped(TimeLimit)
+    except Exception:  # e.g. a SubprocVecEnv that cannot pickle the class (a re-imported gymnasium): ask the specs
+        try:
+            limits = [getattr(spec, "max_episode_steps", None) for spec in env.get_attr("spec")]
+        except Exception:  # a VecEnv that cannot tell
+            return None
+        known = [int(limit) for limit in limits if limit is not None]
+        return max(known) if known and len(known) == len(limits) else None
+    try:
+        if not all(wrapped):
             return None
         return max(int(limit) for limit in env.get_attr("_max_episode_steps"))
     except (AttributeError, NotImplementedError, TypeError, ValueError):  # a VecEnv that cannot tell
