@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gc
 import logging
 import os
 import subprocess
@@ -333,3 +334,60 @@ def test_evaluator_ray_from_env_id(toy_ray: RayEvaluator) -> None:
     finally:
         if remote._evaluator is not None:
             remote._evaluator.close()
+
+
+def assert_dead(actors: list[Any]) -> None:
+    for actor in actors:
+        with pytest.raises(ray.exceptions.RayActorError):
+            ray.get(actor.ready.remote(), timeout=60)
+
+
+@pytest.mark.timeout(300, method="thread")
+def test_models_in_a_loop(toy_ray: RayEvaluator) -> None:
+    # A seed loop (or a notebook re-run) of the documented one-liner, never closing the evaluators: toy_ray holds
+    # one of the two CPUs and the first model's actor the other, yet every model trains (they share the actors).
+    evaluators = []
+    for seed in range(3):
+        model = ARS("LinearPolicy", "Pendulum-v1", n_delta=1, seed=seed, evaluator="ray")
+        model.learn(1)
+        assert model._n_updates == 1 and model.num_timesteps == 2 * 200
+        evaluators.append(model._evaluator)
+    assert all(isinstance(e, RayEvaluator) and e.num_workers == 1 for e in evaluators)
+    actors = evaluators[0]._actors
+    assert [a._actor_id for a in evaluators[2]._actors] == [a._actor_id for a in actors]
+    # The actors live while an evaluator uses them, and are killed when the last one is closed.
+    for evaluator in evaluators[:2]:
+        evaluator.close()
+    assert ray.get(actors[0].ready.remote(), timeout=60) == 1
+    evaluators[2].close()
+    assert_dead(actors)
+
+
+@pytest.mark.timeout(300, method="thread")
+def test_unused_evaluator_releases_its_actors() -> None:
+    evaluator = RayEvaluator(ToyEnv, num_workers=1, num_cpus_per_worker=0.5)
+    evaluator.start()
+    actors = evaluator._actors
+    del evaluator
+    gc.collect()
+    assert_dead(actors)
+
+
+@pytest.mark.timeout(300, method="thread")
+def test_new_evaluator_makes_room_or_names_the_cause(toy_ray: RayEvaluator, caplog: pytest.LogCaptureFixture) -> None:
+    toy_ray.start()
+    policy = toy_policy()
+    population = toy_population(policy, 4)
+    # toy_ray is idle and holds one CPU: an evaluator that needs both stops its actors (they restart when used).
+    with caplog.at_level(logging.WARNING), RayEvaluator(ToyEnv, num_workers=2) as evaluator:
+        result = evaluator.evaluate(policy, population, population[0], 1, seed=0)
+        assert result.returns.shape == (4, 1)
+    assert any("idle Ray actor" in record.getMessage() for record in caplog.records)
+    assert toy_ray._actors == []
+    # More actors than the cluster can ever place: a clear error after start_timeout, not a hang.
+    too_many = RayEvaluator(ToyEnv, num_workers=3, start_timeout=5)
+    with pytest.raises(RuntimeError, match=r"could not start \d of 3 actor\(s\) within start_timeout=5 s"):
+        too_many.evaluate(policy, population, population[0], 1, seed=0)
+    assert too_many._actors == []
+    # toy_ray starts again when used.
+    assert toy_ray.evaluate(policy, population, population[0], 1, seed=0).returns.shape == (4, 1)

@@ -378,7 +378,7 @@ class PopulationAlgorithm(ESBaseAlgorithm):
             return not self._stop_training
 
         result = evaluator.evaluate(
-            self.policy,
+            self.policy.network_spec(),
             population,
             self.strategy.center,
             self.n_eval_episodes,
