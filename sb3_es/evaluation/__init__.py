@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING, Any
 
 from sb3_es.evaluation.base import ObsStats, PopulationEvaluator, PopulationResult, StepHook
 from sb3_es.evaluation.network import NetworkSpec
+from sb3_es.evaluation.processes import ProcessEvaluator
 from sb3_es.evaluation.shaping import RewardShaping
 from sb3_es.evaluation.vec_env import VecEnvEvaluator
 
@@ -19,6 +20,7 @@ __all__ = [
     "ObsStats",
     "PopulationEvaluator",
     "PopulationResult",
+    "ProcessEvaluator",
     "RayEvaluator",
     "RewardShaping",
     "StepHook",
