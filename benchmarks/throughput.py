@@ -1,14 +1,14 @@
 """
 Env-step throughput of sb3-es ARS against sb3-contrib's ARS and a plain ``env.step`` loop.
 
-Command (about 3.5 minutes on 2 cores with the defaults, 4 with ``--profile``)::
+Command (about 5 minutes on 2 cores with the defaults, 6 with ``--profile``)::
 
     python benchmarks/throughput.py
 
 Options: ``--seconds S`` (timed window of each measurement, default 8), ``--warmup S`` (default 1.5),
-``--quick`` (2 s windows, smoke test), ``--only bipedal|pendulum``, ``--torch-threads N``
-(``th.set_num_threads`` in the main process), ``--profile`` (also print where our engine spends its time per
-vec step).
+``--quick`` (2 s windows, smoke test; ``--seconds 0.5 --warmup 0.2`` for a still shorter one),
+``--only bipedal|pendulum``, ``--torch-threads N`` (``th.set_num_threads`` in the main process), ``--profile``
+(also print where our engine spends its time per vec step).
 
 Every ARS measurement builds the model and its envs, warms up with a short ``learn()``, then times
 ``learn(..., reset_num_timesteps=False)`` for a fixed wall time; steps are the difference of
@@ -17,9 +17,12 @@ Every ARS measurement builds the model and its envs, warms up with a short ``lea
 loop runs ``env.step(env.action_space.sample())`` (with resets) in N processes for the same time and
 sums their rates. All ARS runs: ``MlpPolicy`` ([64, 64]), ``n_delta=8``, other hyperparameters default.
 
-Our "2 processes" configuration is the Ray evaluator with 2 workers (each actor runs the batched engine on its
-own envs, one round trip per generation); ``SubprocVecEnv`` with 2 envs is also reported: it pays an IPC round
-trip on every vec step, which costs more than a BipedalWalker step. The Ray rows need ``pip install ray``.
+Our "2 processes" configurations are the sharded evaluator with 2 workers, hosted by worker processes
+(``ProcessEvaluator``, standard library) or by Ray actors (``RayEvaluator``): each worker runs the batched engine
+on its own envs, one round trip per generation. ``SubprocVecEnv`` with 2 envs is also reported: it pays an IPC
+round trip on every vec step, which costs more than a BipedalWalker step. The startup time of each sharded
+evaluator (workers started and their envs built; for Ray, ``ray.init`` included) is printed too. The Ray rows need
+``pip install ray``.
 """
 
 from __future__ import annotations
@@ -52,6 +55,9 @@ from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv
 import sb3_es
 from sb3_es import ARS
 from sb3_es.evaluation.base import ObsStats
+from sb3_es.evaluation.network import NetworkSpec
+from sb3_es.evaluation.processes import ProcessEvaluator
+from sb3_es.evaluation.sharded import ShardedEvaluator
 
 HAVE_RAY = importlib.util.find_spec("ray") is not None
 
@@ -97,6 +103,7 @@ class Result:
     steps: int
     seconds: float
     ep_len: float | None = None
+    startup: float | None = None
 
     @property
     def rate(self) -> float:
@@ -135,20 +142,36 @@ def measure_ours(env_id: str, n_envs: int, subproc: bool, seconds: float, warmup
         env.close()
 
 
-def measure_ours_ray(env_id: str, workers: int, envs_per_worker: int, seconds: float, warmup: float) -> Result:
-    """Our ARS with the Ray evaluator: ``workers`` actors (processes), each running ``envs_per_worker`` env slots."""
-    import ray
+def measure_ours_sharded(
+    host: str, env_id: str, workers: int, envs_per_worker: int, seconds: float, warmup: float
+) -> Result:
+    """
+    Our ARS with a sharded evaluator: ``workers`` worker processes (``host="processes"``) or Ray actors
+    (``host="ray"``), each running ``envs_per_worker`` env slots. The startup is timed separately.
+    """
+    start = time.perf_counter()
+    evaluator: ShardedEvaluator
+    if host == "ray":
+        import ray
 
-    from sb3_es.evaluation.ray import RayEvaluator
+        from sb3_es.evaluation.ray import RayEvaluator
 
-    evaluator = RayEvaluator(env_id, num_workers=workers, envs_per_worker=envs_per_worker)
+        evaluator = RayEvaluator(env_id, num_workers=workers, envs_per_worker=envs_per_worker)
+    else:
+        evaluator = ProcessEvaluator(env_id, num_workers=workers, envs_per_worker=envs_per_worker)
     try:
+        evaluator.start()
+        startup = time.perf_counter() - start
         model = ARS("MlpPolicy", env_id, n_delta=N_DELTA, seed=0, evaluator=evaluator)
-        config = f"Ray {workers} workers x {envs_per_worker} envs ({workers} proc)"
-        return _time_model(model, env_id, "sb3-es ARS", config, seconds, warmup, per_step=False)
+        name = "Ray" if host == "ray" else "processes"
+        config = f"{name} {workers} workers x {envs_per_worker} envs ({workers} proc)"
+        result = _time_model(model, env_id, "sb3-es ARS", config, seconds, warmup, per_step=False)
+        result.startup = startup
+        return result
     finally:
         evaluator.close()
-        ray.shutdown()
+        if host == "ray":
+            ray.shutdown()
 
 
 def measure_contrib(env_id: str, n_workers: int, seconds: float, warmup: float) -> Result:
@@ -244,8 +267,8 @@ class _EnvTimer(gym.Wrapper):
 
 def profile_ours(env_id: str, n_envs: int, subproc: bool, seconds: float, warmup: float) -> None:
     """
-    Print the per-vec-step time of each part of our engine, measured by wrapping its methods on the instance
-    (no change to sb3-es). Works with both the torch (``flatten_numpy_obs``) and NumPy (``flatten_obs``) engines.
+    Print the per-vec-step time of each part of our engine, measured by wrapping its methods (the network spec's
+    on the class, the env's and the strategy's on the instance; no change to sb3-es).
     """
     vec_cls = SubprocVecEnv if subproc else DummyVecEnv
     env: VecEnv = make_vec_env(env_id, n_envs=n_envs, seed=0, vec_env_cls=vec_cls, wrapper_class=_EnvTimer)
@@ -271,10 +294,12 @@ def profile_ours(env_id: str, n_envs: int, subproc: bool, seconds: float, warmup
         setattr(obj, attr, timed(name or attr, getattr(obj, attr)))
         return name or attr
 
-    policy = model.policy
-    flatten = wrap(policy, "flatten_numpy_obs") or wrap(policy, "flatten_obs")
-    nested = [name for name in (wrap(policy, a) for a in ("normalize", "_forward_numpy", "_postprocess")) if name]
-    wrap(policy, "population_actions")
+    # The evaluator runs the policy's NetworkSpec (a new one each generation): time its methods on the class.
+    originals = {name: getattr(NetworkSpec, name) for name in ("flatten_obs", "normalize", "forward", "__call__")}
+    for name, method in originals.items():
+        setattr(NetworkSpec, name, timed(name, method))
+    flatten = "flatten_obs"
+    nested = ["normalize", "forward"]
     wrap(env, "step")
     assert model.strategy is not None
     wrap(model.strategy, "ask", "ask/tell")
@@ -299,6 +324,8 @@ def profile_ours(env_id: str, n_envs: int, subproc: bool, seconds: float, warmup
         _run_for(model, seconds)
     finally:
         ObsStats.add = original_add  # type: ignore[method-assign]
+        for name, method in originals.items():
+            setattr(NetworkSpec, name, method)
     total = time.perf_counter() - start
     busy = sum(env.get_attr("busy")) - busy_start - reset_busy[0]
     env.close()
@@ -307,10 +334,10 @@ def profile_ours(env_id: str, n_envs: int, subproc: bool, seconds: float, warmup
     env_compute = busy / (n_envs if subproc else 1)  # per worker when the workers run in parallel
     per_worker = f" (mean per worker, {n_envs} in parallel)" if subproc else ""
     rows = [
-        (f"policy.{flatten}", timers[str(flatten)]),
+        ("NetworkSpec.flatten_obs", timers[flatten]),
         ("ObsStats.add (observation statistics)", timers["ObsStats.add"]),
-        ("policy.population_actions", timers["population_actions"]),
-        *[(f"- of which policy.{name}", timers[name]) for name in nested],
+        ("NetworkSpec.__call__ (batched forward pass)", timers["__call__"]),
+        *[(f"- of which NetworkSpec.{name}", timers[name]) for name in nested],
         ("env.step", timers["step"]),
         (f"- of which gym env step + auto-reset + Monitor{per_worker}", env_compute),
         ("- of which VecEnv overhead (copies, IPC, waiting)", timers["step"] - env_compute),
@@ -343,6 +370,26 @@ def _table(results: list[Result], plain: Result | None, contrib: Result | None) 
             f"| {vs_plain} | {vs_contrib} |"
         )
     return lines
+
+
+def _sharded_checks(env_id: str, procs: list[Result], ray_rows: list[Result], plain2: Result) -> list[str]:
+    """:return: The targets of the 2-worker sharded evaluators: >= 90% of the plain 2-process loop, startup < 2 s."""
+    checks = []
+    for label, rows in (("processes", procs), ("Ray", ray_rows)):
+        if not rows:
+            continue
+        best = max(rows, key=lambda r: r.rate)
+        checks.append(
+            _check(f"{env_id} ours ({best.config}) / plain loop (2 proc)", 100 * best.rate / plain2.rate, 90, "%")
+        )
+        startup = max(r.startup or 0.0 for r in rows)
+        if label == "processes":
+            checks.append(
+                f"{'PASS' if startup < 2 else 'FAIL'}: {env_id} {label} startup: {startup:.2f} s (target < 2 s)"
+            )
+        else:
+            checks.append(f"INFO: {env_id} {label} startup (ray.init and actors): {startup:.2f} s")
+    return checks
 
 
 def _check(label: str, value: float, target: float, unit: str = "x") -> str:
@@ -378,17 +425,19 @@ def main() -> None:
         ours_sub2 = run(measure_ours, BIPEDAL, 2, True)
         ours = [ours_sub2, run(measure_ours, BIPEDAL, 4, True)]
         ours += [run(measure_ours, BIPEDAL, n, False) for n in (2, 4, 8)]
+        ours_procs = [run(measure_ours_sharded, "processes", BIPEDAL, 2, k) for k in (1, 2, 4)]
+        ours += ours_procs
         contrib_async = run(measure_contrib, BIPEDAL, 2)
         contrib_single = run(measure_contrib, BIPEDAL, 0)
         plain1 = run(measure_plain, BIPEDAL, 1)
         # Ray last: its daemons (GCS, raylet) keep running until ray.shutdown() and would slow later rows.
-        ours_ray = [run(measure_ours_ray, BIPEDAL, 2, k) for k in (2, 4)] if HAVE_RAY else []
+        ours_ray = [run(measure_ours_sharded, "ray", BIPEDAL, 2, k) for k in (2, 4)] if HAVE_RAY else []
         ours += ours_ray
         lines += _table([*ours, contrib_async, contrib_single, plain, plain1], plain, contrib_async)
         best = max(ours, key=lambda r: r.rate)
-        # "2 processes": our 2-process configuration is Ray with 2 workers (each running the batched engine on
-        # its own envs); SubprocVecEnv with 2 envs is reported too (it pays an IPC round trip per step).
-        two_proc = max(ours_ray, key=lambda r: r.rate) if ours_ray else ours_sub2
+        # "2 processes": the sharded evaluator with 2 workers (each running the batched engine on its own envs);
+        # SubprocVecEnv with 2 envs is reported too (it pays an IPC round trip per step).
+        two_proc = max(ours_procs, key=lambda r: r.rate)
         checks += [
             _check(
                 f"{BIPEDAL} ours ({two_proc.config}) / sb3-contrib ARS (AsyncEval, 2 proc)",
@@ -400,24 +449,21 @@ def main() -> None:
                 two_proc.rate / contrib_single.rate,
                 3,
             ),
-            _check(
-                f"{BIPEDAL} ours ({two_proc.config}) / plain loop (2 proc)",
-                100 * two_proc.rate / plain.rate,
-                85,
-                "%",
-            ),
+            *_sharded_checks(BIPEDAL, ours_procs, ours_ray, plain),
             f"INFO: {BIPEDAL} closest to the plain loop: ours {best.config}: {100 * best.rate / plain.rate:.0f}%; "
             f"ours (SubprocVecEnv n_envs=2) / plain loop (2 proc): {100 * ours_sub2.rate / plain.rate:.0f}%",
         ]
     if args.only in (None, "pendulum"):
         ours16 = run(measure_ours, PENDULUM, 16, False)
         ours = [ours16] + [run(measure_ours, PENDULUM, n, False) for n in (1, 4)]
+        ours_procs = [run(measure_ours_sharded, "processes", PENDULUM, 2, k) for k in (4, 8)]
         contrib_single = run(measure_contrib, PENDULUM, 0)
         plain1 = run(measure_plain, PENDULUM, 1)
         plain2 = run(measure_plain, PENDULUM, 2)
+        ours_ray = [run(measure_ours_sharded, "ray", PENDULUM, 2, 8)] if HAVE_RAY else []
         if lines:
             lines.append("")
-        lines += _table([*ours, contrib_single, plain1, plain2], plain1, contrib_single)
+        lines += _table([*ours, *ours_procs, *ours_ray, contrib_single, plain1, plain2], plain1, contrib_single)
         checks.append(
             _check(
                 f"{PENDULUM} ours (DummyVecEnv n_envs=16) / sb3-contrib ARS (single process)",
@@ -425,6 +471,7 @@ def main() -> None:
                 5,
             )
         )
+        checks += _sharded_checks(PENDULUM, ours_procs, ours_ray, plain2)
 
     command = " ".join(["python", *sys.argv])
     print("\n## Throughput: env steps per second\n")
@@ -439,7 +486,8 @@ def main() -> None:
         f"{sb3.__version__}, sb3-contrib {sb3_contrib.__version__}, torch {th.__version__}, numpy "
         f"{np.__version__}, gymnasium {gym.__version__}"
     )
-    print("- 'vs plain': ratio to the plain loop with the same number of processes (BipedalWalker: 2, Pendulum: 1);")
+    print("- 'vs plain': ratio to the plain loop with the same number of processes (BipedalWalker: 2, Pendulum: 1;")
+    print("  the checks compare every 2-worker configuration with the plain 2-process loop);")
     print("  'vs contrib': ratio to sb3-contrib's ARS (BipedalWalker: AsyncEval 2 proc, Pendulum: single process)\n")
     print("\n".join(lines))
     print()

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import os
 from pathlib import Path
 from typing import Any
 
@@ -279,3 +280,31 @@ class GenerationRecorder(BaseCallback):
 
     def _on_training_end(self) -> None:
         self.training_ended += 1
+
+
+class CrashingToyEnv(ToyEnv):
+    """
+    ``ToyEnv`` whose process dies (``os._exit``) at its ``crash_step``-th step if ``crash_flag`` can still be
+    created (so exactly one env, in one worker, dies once), and which raises ``ValueError`` while ``error_flag``
+    exists.
+    """
+
+    def __init__(self, crash_flag: str, error_flag: str, crash_step: int = 5) -> None:
+        super().__init__()
+        self.crash_flag = crash_flag
+        self.error_flag = error_flag
+        self.crash_step = crash_step
+        self.steps = 0
+
+    def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict]:
+        self.steps += 1
+        if self.steps == self.crash_step:
+            try:
+                os.close(os.open(self.crash_flag, os.O_CREAT | os.O_EXCL | os.O_WRONLY))
+            except FileExistsError:
+                pass
+            else:
+                os._exit(1)
+        if os.path.exists(self.error_flag):
+            raise ValueError("env error raised inside a worker")
+        return super().step(action)

@@ -50,7 +50,8 @@ class ARS(PopulationAlgorithm):
     :param seed: Random seed.
     :param verbose: 0 none, 1 training information, 2 debug.
     :param device: Torch device (the CPU is the right choice for these policies).
-    :param evaluator: ``"local"`` or a :class:`~sb3_es.evaluation.PopulationEvaluator` (e.g. Ray); not saved.
+    :param evaluator: ``"local"``, ``"processes"`` (one worker process per CPU), ``"ray"`` or a
+        :class:`~sb3_es.evaluation.PopulationEvaluator`; not saved.
     :param noise_table_size: Read perturbations from a shared noise table of this many float32 values (e.g.
         ``2**24``) instead of drawing them fresh, so that a Ray evaluator sends an offset per candidate
         rather than a parameter vector. ``None`` (default) draws them fresh.

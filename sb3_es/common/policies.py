@@ -5,10 +5,10 @@ A :class:`FlatPolicy` is an ordinary SB3 :class:`~stable_baselines3.common.polic
 
 * its trainable parameters can be read and written as one flat vector
   (:meth:`FlatPolicy.parameters_to_vector`, :meth:`FlatPolicy.load_from_vector`);
-* :meth:`FlatPolicy.population_actions` runs *one batched forward pass* in which row ``k`` of the
-  observations is fed through the network whose parameters are row ``k`` of a population matrix,
-  so that every env slot of a VecEnv can evaluate a different candidate in the same step. The
-  forward pass is NumPy (much faster than torch for these sizes) and ``predict()`` uses the same code.
+* :meth:`FlatPolicy.network_spec` describes the network as a picklable
+  :class:`~sb3_es.evaluation.network.NetworkSpec` (layout, activations, action bounds, observation statistics),
+  which the evaluators run: one batched NumPy forward pass in which row ``k`` of the observations goes through
+  the network of parameter row ``k``. ``predict()`` runs the same spec, so both give identical actions.
 
 Observation normalization (ARS-V2) lives inside the policy: running mean and variance are buffers,
 saved with the model and applied by ``predict()``. They are frozen while a generation is evaluated
@@ -17,62 +17,29 @@ and updated between generations by the algorithm (:meth:`FlatPolicy.update_obs_r
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 import torch as th
 from gymnasium import spaces
 from stable_baselines3.common.policies import BasePolicy
-from stable_baselines3.common.preprocessing import get_flattened_obs_dim, preprocess_obs
 from stable_baselines3.common.running_mean_std import RunningMeanStd
 from stable_baselines3.common.torch_layers import create_mlp
 from stable_baselines3.common.type_aliases import PyTorchObs
 from torch import nn
 
-#: Variance floor used when normalizing observations (same as SB3's ``VecNormalize``).
-OBS_NORM_EPS = 1e-8
+from sb3_es.evaluation.network import (
+    OBS_NORM_EPS,
+    Layer,
+    LayerNorm,
+    Linear,
+    NetworkSpec,
+    ParamSlice,
+    activation_for,
+    flat_obs_dim,
+)
 
-
-#: Observation spaces a policy takes, alone or as the entries of a ``Dict``.
-FLAT_OBS_SPACES = (spaces.Box, spaces.Discrete, spaces.MultiDiscrete, spaces.MultiBinary)
-
-
-def flat_obs_dim(observation_space: spaces.Space) -> int:
-    """
-    Size of the flattened observation vector, or a clear error for a space that cannot be flattened.
-
-    :param observation_space: A ``Box``, ``Discrete``, ``MultiDiscrete`` or ``MultiBinary`` space, or a ``Dict`` of
-        them (e.g. dm_control through shimmy). Discrete entries count one input per value (one-hot).
-    :return: Number of scalars in one flattened observation.
-    """
-    if isinstance(observation_space, spaces.Dict):
-        bad = {k: type(s).__name__ for k, s in observation_space.spaces.items() if not isinstance(s, FLAT_OBS_SPACES)}
-        if bad:
-            raise ValueError(
-                f"Unsupported observation space: Dict entries {bad} are not Box, Discrete, MultiDiscrete or "
-                "MultiBinary spaces; wrap the env with gymnasium.wrappers.FlattenObservation."
-            )
-        return sum(int(get_flattened_obs_dim(s)) for s in observation_space.spaces.values())
-    if isinstance(observation_space, FLAT_OBS_SPACES):
-        return int(get_flattened_obs_dim(observation_space))
-    raise ValueError(
-        f"Unsupported observation space {observation_space}: sb3-es policies take Box, Discrete, MultiDiscrete and "
-        "MultiBinary observations, or a Dict of them. Wrap the env with gymnasium.wrappers.FlattenObservation "
-        "(Tuple, ...) or a TransformObservation that produces a Box."
-    )
-
-
-def _flatten_entry(obs: np.ndarray, space: spaces.Space) -> np.ndarray:
-    """
-    :param obs: A batch of observations of ``space``.
-    :param space: The space: a ``Box`` is flattened; other spaces go through SB3's ``preprocess_obs`` (one-hot).
-    :return: ``(n, flat_dim)`` observations.
-    """
-    obs = np.asarray(obs)
-    if not isinstance(space, spaces.Box):
-        obs = preprocess_obs(th.as_tensor(obs), space, normalize_images=False).numpy()  # type: ignore[union-attr]
-    return obs.reshape(obs.shape[0], -1)
+__all__ = ["OBS_NORM_EPS", "FlatPolicy", "LinearPolicy", "MlpPolicy", "flat_obs_dim"]
 
 
 class FlatPolicy(BasePolicy):
@@ -153,24 +120,24 @@ class FlatPolicy(BasePolicy):
         self._build_layout()
 
     def _build_layout(self) -> None:
-        """Record where each module's parameters lie in the flat vector (order of ``parameters()``)."""
-        self._layout: list[tuple[str, nn.Module, list[tuple[int, int, tuple[int, ...]]]]] = []
+        """Describe each module of ``action_net`` as a layer of the spec (offsets in the order of ``parameters()``)."""
+        layers: list[Layer] = []
         offset = 0
         for module in self.action_net:
-            slices = []
+            slices: list[ParamSlice] = []
             for param in module.parameters(recurse=False):
                 size = param.numel()
                 slices.append((offset, offset + size, tuple(param.shape)))
                 offset += size
             if isinstance(module, nn.Linear):
-                kind = "linear"
+                layers.append(Linear(slices[0], slices[1] if len(slices) > 1 else None))
             elif isinstance(module, nn.LayerNorm):
-                kind = "layer_norm"
+                layers.append(LayerNorm(slices[0], slices[1], float(module.eps)))
             elif slices:
                 raise ValueError(f"Module {module} has parameters but no batched forward pass.")
             else:
-                kind = "elementwise"
-            self._layout.append((kind, module, slices))
+                layers.append(activation_for(module))
+        self._layers = tuple(layers)
         self.num_params = offset
 
     def _get_constructor_parameters(self) -> dict[str, Any]:
@@ -193,9 +160,7 @@ class FlatPolicy(BasePolicy):
 
     def output_layer_slice(self) -> slice:
         """:return: Where the output layer's weight and bias lie in the flat vector (all of it for a linear policy)."""
-        linear = [slices for kind, _, slices in self._layout if kind == "linear"]
-        last = linear[-1]
-        return slice(last[0][0], last[-1][1])
+        return self.network_spec().output_layer_slice()
 
     def load_from_vector(self, vector: np.ndarray) -> None:
         """
@@ -209,7 +174,26 @@ class FlatPolicy(BasePolicy):
         tensor = th.as_tensor(vector, dtype=th.float32, device=self.device)
         th.nn.utils.vector_to_parameters(tensor, self.parameters())
 
-    # ------------------------------------------------------------------ observations
+    # ------------------------------------------------------------------ the network evaluators run
+    def network_spec(self) -> NetworkSpec:
+        """:return: The network (architecture, action bounds, current observation statistics) as a picklable spec."""
+        mean = var = None
+        if self.normalize_observations:
+            mean, var = self.obs_mean.cpu().numpy().copy(), self.obs_var.cpu().numpy().copy()
+        return NetworkSpec(
+            self.observation_space,
+            self.action_space,
+            self._layers,
+            self.num_params,
+            squash_output=self.squash_output,
+            obs_mean=mean,
+            obs_var=var,
+        )
+
+    def population_forward(self) -> NetworkSpec:
+        """:return: The batched forward pass, observation statistics frozen (see :meth:`network_spec`)."""
+        return self.network_spec()
+
     def flatten_obs(self, obs: np.ndarray | dict[str, np.ndarray]) -> np.ndarray:
         """
         Flatten a batch of observations to ``(n, obs_dim)`` float32 (discrete ones one-hot, as SB3 does).
@@ -217,22 +201,30 @@ class FlatPolicy(BasePolicy):
         :param obs: Array, or dict of arrays for ``Dict`` spaces, with a leading batch dimension.
         :return: Flattened observations.
         """
-        space = self.observation_space
-        if isinstance(space, spaces.Dict):
-            assert isinstance(obs, dict)
-            parts = [_flatten_entry(obs[key], subspace) for key, subspace in space.spaces.items()]
-            return np.concatenate(parts, axis=1).astype(np.float32, copy=False)
-        return _flatten_entry(obs, space).astype(np.float32, copy=False)  # type: ignore[arg-type]
+        return self.network_spec().flatten_obs(obs)
 
     def normalize(self, flat_obs: np.ndarray) -> np.ndarray:
         """
-        Apply the running observation statistics (as :meth:`population_forward` does).
+        Apply the running observation statistics (as the population pass does).
 
         :param flat_obs: Flattened observations ``(n, obs_dim)``.
         :return: Normalized observations, float32.
         """
-        return self.population_forward().normalize(flat_obs)
+        return self.network_spec().normalize(flat_obs)
 
+    def population_actions(self, params: np.ndarray, flat_obs: np.ndarray) -> np.ndarray:
+        """
+        One batched forward pass where observation row ``k`` goes through the network of parameter row ``k``.
+
+        Gives exactly the actions ``predict()`` gives for each (parameters, observation) pair.
+
+        :param params: Population parameters ``(k, num_params)``, float32.
+        :param flat_obs: Flattened raw observations of the ``k`` slots (see :meth:`flatten_obs`).
+        :return: Env actions ``(k, *action_shape)``.
+        """
+        return self.network_spec()(params, flat_obs)
+
+    # ------------------------------------------------------------------ observation statistics
     def obs_rms(self) -> RunningMeanStd:
         """:return: A copy of the observation statistics as an SB3 ``RunningMeanStd``."""
         rms = RunningMeanStd(shape=(self.obs_dim,))
@@ -257,55 +249,7 @@ class FlatPolicy(BasePolicy):
         self.obs_var.copy_(th.as_tensor(rms.var))
         self.obs_count.fill_(rms.count)
 
-    # ------------------------------------------------------------------ forward passes
-    def _forward_numpy(self, params: np.ndarray, x: np.ndarray) -> np.ndarray:
-        """
-        Network outputs where row ``k`` of ``x`` goes through the network of parameter row ``k``.
-
-        NumPy's batched matrix-vector product is much faster than torch's for these small networks, and
-        ``predict()`` uses this same code (broadcasting one parameter row), so both give identical actions.
-
-        :param params: Parameters ``(k, num_params)`` or ``(1, num_params)`` (broadcast), float32.
-        :param x: Normalized observations ``(k, obs_dim)``, float32.
-        :return: Raw outputs ``(k, output_dim)``.
-        """
-        x = x[:, :, None]  # (k, features, 1)
-        for kind, module, slices in self._layout:
-            if kind == "linear":
-                (w0, w1, w_shape), *bias = slices
-                x = np.matmul(params[:, w0:w1].reshape(-1, *w_shape), x)
-                if bias:
-                    x = x + params[:, bias[0][0] : bias[0][1], None]
-            elif kind == "layer_norm":
-                assert isinstance(module, nn.LayerNorm)
-                mean = x.mean(axis=1, keepdims=True)
-                var = x.var(axis=1, keepdims=True)
-                (g0, g1, _), (b0, b1, _) = slices
-                x = (x - mean) / np.sqrt(var + module.eps) * params[:, g0:g1, None] + params[:, b0:b1, None]
-            else:
-                x = _apply_elementwise(module, x)
-        return x[:, :, 0]
-
-    def population_forward(self) -> PopulationForward:
-        """
-        The batched forward pass with the current observation statistics frozen (one per generation).
-
-        :return: A callable ``(params, flat_obs) -> env actions``.
-        """
-        return PopulationForward(self)
-
-    def population_actions(self, params: np.ndarray, flat_obs: np.ndarray) -> np.ndarray:
-        """
-        One batched forward pass where observation row ``k`` goes through the network of parameter row ``k``.
-
-        Gives exactly the actions ``predict()`` gives for each (parameters, observation) pair.
-
-        :param params: Population parameters ``(k, num_params)``, float32.
-        :param flat_obs: Flattened raw observations of the ``k`` slots (see :meth:`flatten_obs`).
-        :return: Env actions ``(k, *action_shape)``.
-        """
-        return self.population_forward()(params, flat_obs)
-
+    # ------------------------------------------------------------------ SB3 predict
     def forward(self, obs: PyTorchObs, deterministic: bool = True) -> th.Tensor:
         return self._predict(obs, deterministic)
 
@@ -315,84 +259,13 @@ class FlatPolicy(BasePolicy):
             obs: np.ndarray | dict[str, np.ndarray] = {k: v.cpu().numpy() for k, v in observation.items()}
         else:
             obs = observation.cpu().numpy()
+        network = self.network_spec()
         params = self.parameters_to_vector().astype(np.float32)[None]
-        out = self._forward_numpy(params, self.normalize(self.flatten_obs(obs)))
+        # The raw outputs: SB3's predict() then rescales (squash) or clips them as the spec's actions do.
+        out = network.forward(params, network.normalize(network.flatten_obs(obs)))
         if isinstance(self.action_space, spaces.Discrete):
             return th.as_tensor(out.argmax(axis=1))
         return th.as_tensor(out)
-
-
-class PopulationForward:
-    """
-    A policy's batched forward pass with its observation statistics and action scaling computed once.
-
-    The statistics are frozen while a generation is evaluated, so the evaluator builds one of these
-    per generation; ``predict()`` builds one per call. Both therefore compute identical actions.
-
-    :param policy: The policy.
-    """
-
-    def __init__(self, policy: FlatPolicy) -> None:
-        self.policy = policy
-        self.mean: np.ndarray | None = None
-        self.inv_std: np.ndarray | None = None
-        if policy.normalize_observations:
-            self.mean = policy.obs_mean.cpu().numpy().astype(np.float32)
-            self.inv_std = (1.0 / np.sqrt(policy.obs_var.cpu().numpy() + OBS_NORM_EPS)).astype(np.float32)
-        self.discrete = isinstance(policy.action_space, spaces.Discrete)
-        if not self.discrete:
-            assert isinstance(policy.action_space, spaces.Box)
-            self.shape = policy.action_space.shape
-            self.low = policy.action_space.low
-            self.high = policy.action_space.high
-            self.span = self.high - self.low
-
-    def normalize(self, flat_obs: np.ndarray) -> np.ndarray:
-        """
-        :param flat_obs: Flattened observations ``(n, obs_dim)``.
-        :return: Normalized observations, float32.
-        """
-        if self.mean is None or self.inv_std is None:
-            return flat_obs
-        return (flat_obs - self.mean) * self.inv_std
-
-    def __call__(self, params: np.ndarray, flat_obs: np.ndarray) -> np.ndarray:
-        """
-        :param params: Parameters ``(k, num_params)`` (or one row, broadcast), float32.
-        :param flat_obs: Flattened raw observations ``(k, obs_dim)``.
-        :return: Env actions: argmax for Discrete; for Box, tanh outputs rescaled to the bounds
-            (as SB3's ``unscale_action``) or raw outputs clipped to them.
-        """
-        out = self.policy._forward_numpy(params, self.normalize(flat_obs))
-        if self.discrete:
-            return out.argmax(axis=1)
-        actions = out.reshape((-1, *self.shape))
-        if self.policy.squash_output:
-            return self.low + (0.5 * (actions + 1.0) * self.span)
-        return np.clip(actions, self.low, self.high)
-
-
-_ELEMENTWISE: dict[type[nn.Module], Callable[[np.ndarray], np.ndarray]] = {
-    nn.ReLU: lambda x: np.maximum(x, 0),
-    nn.Tanh: np.tanh,
-    nn.Sigmoid: lambda x: 1 / (1 + np.exp(-x)),
-    nn.Identity: lambda x: x,
-}
-
-
-def _apply_elementwise(module: nn.Module, x: np.ndarray) -> np.ndarray:
-    """
-    Apply an activation module to a NumPy array (fast paths for common ones, torch for the rest).
-
-    :param module: Activation module.
-    :param x: Input.
-    :return: Output, same shape and dtype.
-    """
-    fast = _ELEMENTWISE.get(type(module))
-    if fast is not None:
-        return fast(x).astype(x.dtype, copy=False)
-    with th.no_grad():
-        return module(th.from_numpy(np.ascontiguousarray(x))).numpy()
 
 
 class MlpPolicy(FlatPolicy):

@@ -16,8 +16,9 @@ from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedul
 
 from sb3_es.common.base_class import ESBaseAlgorithm
 from sb3_es.common.checks import check_positive, check_scheduled_value
+from sb3_es.common.evaluator_choice import check_evaluator, resolve_evaluator
 from sb3_es.common.policies import FlatPolicy, LinearPolicy, MlpPolicy
-from sb3_es.evaluation import PopulationEvaluator, PopulationResult, RewardShaping, VecEnvEvaluator
+from sb3_es.evaluation import PopulationEvaluator, PopulationResult, RewardShaping
 from sb3_es.strategies import Strategy
 from sb3_es.strategies.base import Population
 from sb3_es.strategies.noise import SharedNoiseTable
@@ -85,10 +86,12 @@ class PopulationAlgorithm(ESBaseAlgorithm):
     :param device: Torch device; the CPU is the right choice for small policies.
     :param max_episode_steps: Longest episode training runs (see :class:`~sb3_es.common.base_class.ESBaseAlgorithm`):
         ``None`` takes the env's ``TimeLimit``, or 1000 steps with a warning for an env without one.
-    :param evaluator: Who runs the candidates: ``"local"`` (the model's VecEnv, in this process), ``"ray"``
-        (Ray actors, one per available CPU, building their envs from ``env``, which must then be an env id;
-        see :class:`~sb3_es.evaluation.ray.RayEvaluator`) or a :class:`~sb3_es.evaluation.PopulationEvaluator`
-        instance. Not saved with the model.
+    :param evaluator: Who runs the candidates: ``"local"`` (the model's VecEnv, in this process),
+        ``"processes"`` (worker processes of this machine, one per CPU, see
+        :class:`~sb3_es.evaluation.processes.ProcessEvaluator`), ``"ray"`` (Ray actors, one per available CPU, see
+        :class:`~sb3_es.evaluation.ray.RayEvaluator`) or a :class:`~sb3_es.evaluation.PopulationEvaluator`
+        instance. ``"processes"`` and ``"ray"`` build their workers' envs from ``env``, which must then be an env
+        id. Not saved with the model.
     :param _init_setup_model: Whether to build the model at construction.
     """
 
@@ -124,7 +127,7 @@ class PopulationAlgorithm(ESBaseAlgorithm):
         max_episode_steps: int | None = None,
         _init_setup_model: bool = True,
     ) -> None:
-        # Env id, for evaluator="ray" (each Ray actor builds its envs from it); not saved.
+        # Env id, for evaluator="processes" or "ray" (each worker builds its envs from it); not saved.
         self._env_id = env if isinstance(env, str) else None
         super().__init__(
             policy,
@@ -150,13 +153,7 @@ class PopulationAlgorithm(ESBaseAlgorithm):
         self.zero_policy = zero_policy
         self.strategy: Strategy | None = None
         self._env_rng: np.random.Generator | None = None
-        if not (isinstance(evaluator, PopulationEvaluator) or evaluator in ("local", "ray")):
-            raise ValueError(f"evaluator={evaluator!r}: use 'local', 'ray' or a PopulationEvaluator instance.")
-        if evaluator == "ray" and self._env_id is None:
-            raise ValueError(
-                "evaluator='ray' builds the Ray actors' envs from an env id, but env is not a string: pass the env "
-                "id (env='BipedalWalker-v3'), or evaluator=RayEvaluator(env_factory) from sb3_es.evaluation.ray."
-            )
+        check_evaluator(evaluator, self._env_id)
         self.evaluator = evaluator
         self._evaluator: PopulationEvaluator | None = None
         self._stop_training = False
@@ -261,24 +258,7 @@ class PopulationAlgorithm(ESBaseAlgorithm):
 
     # ------------------------------------------------------------------ training
     def _get_evaluator(self) -> PopulationEvaluator:
-        if isinstance(self.evaluator, PopulationEvaluator):
-            return self.evaluator
-        if self.evaluator == "ray":
-            from sb3_es.evaluation.ray import RayEvaluator  # Ray is optional: imported only when asked for
-
-            if not isinstance(self._evaluator, RayEvaluator):
-                env_id = getattr(self, "_env_id", None)
-                if env_id is None:
-                    raise ValueError(
-                        "evaluator='ray' needs the env id the model was created with (it is not saved): set "
-                        "model.evaluator = RayEvaluator('EnvId') (from sb3_es.evaluation.ray) before learn()."
-                    )
-                self._evaluator = RayEvaluator(env_id)
-            return self._evaluator
-        if self.env is None:
-            raise ValueError("This model has no environment: pass env= to load() or call set_env() before learn().")
-        if not isinstance(self._evaluator, VecEnvEvaluator) or self._evaluator.env is not self.env:
-            self._evaluator = VecEnvEvaluator(self.env)
+        self._evaluator = resolve_evaluator(self.evaluator, getattr(self, "_env_id", None), self.env, self._evaluator)
         return self._evaluator
 
     def learn(
@@ -378,7 +358,7 @@ class PopulationAlgorithm(ESBaseAlgorithm):
             return not self._stop_training
 
         result = evaluator.evaluate(
-            self.policy,
+            self.policy.network_spec(),
             population,
             self.strategy.center,
             self.n_eval_episodes,

@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 from stable_baselines3.common.running_mean_std import RunningMeanStd
 
-from sb3_es.common.policies import FlatPolicy
+from sb3_es.evaluation.network import HasNetworkSpec, NetworkSpec
 from sb3_es.evaluation.shaping import RewardShaping
 from sb3_es.strategies.noise import NoiseTablePopulation
 
@@ -146,7 +146,7 @@ class PopulationEvaluator(ABC):
     @abstractmethod
     def evaluate(
         self,
-        policy: FlatPolicy,
+        network: NetworkSpec | HasNetworkSpec,
         population: np.ndarray | NoiseTablePopulation,
         center: np.ndarray,
         n_episodes: int,
@@ -158,7 +158,8 @@ class PopulationEvaluator(ABC):
         """
         Evaluate every candidate for ``n_episodes`` episodes.
 
-        :param policy: Policy giving the architecture and the (frozen) observation statistics.
+        :param network: The network and its (frozen) observation statistics, or a policy giving them
+            (``policy.network_spec()``).
         :param population: Candidate parameter vectors ``(n_candidates, num_params)``.
         :param center: Parameters of the center (mean) policy, run by slots left idle at the end.
         :param n_episodes: Episodes per candidate.

@@ -8,8 +8,8 @@ from collections.abc import Callable
 import numpy as np
 from stable_baselines3.common.vec_env import VecEnv
 
-from sb3_es.common.policies import FlatPolicy
 from sb3_es.evaluation.base import PopulationEvaluator, PopulationResult, StepHook
+from sb3_es.evaluation.network import HasNetworkSpec, NetworkSpec, as_network
 from sb3_es.evaluation.shaping import RewardShaping
 from sb3_es.evaluation.time_limit import end_capped_episodes
 from sb3_es.strategies.noise import NoiseTablePopulation
@@ -34,7 +34,7 @@ class VecEnvEvaluator(PopulationEvaluator):
 
     def evaluate(
         self,
-        policy: FlatPolicy,
+        network: NetworkSpec | HasNetworkSpec,
         population: np.ndarray | NoiseTablePopulation,
         center: np.ndarray,
         n_episodes: int,
@@ -51,11 +51,12 @@ class VecEnvEvaluator(PopulationEvaluator):
             while it returns True, every slot keeps running the center policy. A Ray actor that has finished its
             share uses it to stay busy until the generation's last candidate episode, on any actor, has ended.
         """
+        network = as_network(network)  # observation statistics frozen for the generation
         env = self.env
         n_envs = env.num_envs
         n_candidates = population.shape[0]
         shape = shaping is not None and not shaping.is_identity
-        result = PopulationResult.empty(n_candidates, n_episodes, policy.obs_dim, shaped=shape)
+        result = PopulationResult.empty(n_candidates, n_episodes, network.obs_dim, shaped=shape)
         returns, lengths, shaped_returns = result.returns, result.lengths, result.shaped_returns
 
         params = np.asarray(population, dtype=np.float32)
@@ -66,7 +67,6 @@ class VecEnvEvaluator(PopulationEvaluator):
         slot_job: list[tuple[int, int] | None] = [None] * n_envs
         active = np.zeros(n_envs, dtype=bool)  # slot runs a candidate (not the center policy)
         slot_params = np.repeat(center_params[None], n_envs, axis=0)
-        forward = policy.population_forward()  # observation statistics frozen for the generation
 
         def assign(slot: int) -> None:
             job = pending.popleft() if pending else None
@@ -83,9 +83,9 @@ class VecEnvEvaluator(PopulationEvaluator):
         obs = env.reset()
 
         while remaining > 0 or (linger is not None and linger()):
-            flat_obs = policy.flatten_obs(obs)  # type: ignore[arg-type]
+            flat_obs = network.flatten_obs(obs)  # type: ignore[arg-type]
             result.obs_stats.add(flat_obs if active.all() else flat_obs[active])
-            actions = forward(slot_params, flat_obs)
+            actions = network(slot_params, flat_obs)
             obs, rewards, dones, infos = env.step(actions)
             result.n_steps += n_envs
             ep_return += rewards

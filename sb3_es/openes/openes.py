@@ -62,7 +62,8 @@ class OpenES(PopulationAlgorithm):
     :param seed: Random seed.
     :param verbose: Verbosity.
     :param device: Torch device.
-    :param evaluator: ``"local"`` or a :class:`~sb3_es.evaluation.PopulationEvaluator` (e.g. Ray); not saved.
+    :param evaluator: ``"local"``, ``"processes"`` (one worker process per CPU), ``"ray"`` or a
+        :class:`~sb3_es.evaluation.PopulationEvaluator`; not saved.
     :param noise_table_size: Read perturbations from a shared noise table of this many float32 values (e.g.
         ``2**24``) instead of drawing them fresh, so that a Ray evaluator sends an offset per candidate
         rather than a parameter vector. ``None`` (default) draws them fresh.

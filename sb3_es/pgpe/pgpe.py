@@ -51,7 +51,8 @@ class PGPE(PopulationAlgorithm):
     :param seed: Random seed.
     :param verbose: Verbosity.
     :param device: Torch device.
-    :param evaluator: ``"local"`` or a :class:`~sb3_es.evaluation.PopulationEvaluator` (e.g. Ray); not saved.
+    :param evaluator: ``"local"``, ``"processes"`` (one worker process per CPU), ``"ray"`` or a
+        :class:`~sb3_es.evaluation.PopulationEvaluator`; not saved.
     :param max_episode_steps: Longest episode training runs, in env steps (an episode reaching it is truncated);
         ``None``: the env's ``TimeLimit``, or 1000 steps, with a warning, for an env without one.
     :param _init_setup_model: Whether to build the model at construction.

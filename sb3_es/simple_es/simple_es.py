@@ -49,7 +49,8 @@ class SimpleES(PopulationAlgorithm):
     :param seed: Random seed.
     :param verbose: Verbosity.
     :param device: Torch device.
-    :param evaluator: ``"local"`` or a :class:`~sb3_es.evaluation.PopulationEvaluator` (e.g. Ray); not saved.
+    :param evaluator: ``"local"``, ``"processes"`` (one worker process per CPU), ``"ray"`` or a
+        :class:`~sb3_es.evaluation.PopulationEvaluator`; not saved.
     :param noise_table_size: Read perturbations from a shared noise table of this many float32 values instead of
         drawing them fresh (a Ray evaluator then sends an offset per candidate). ``None`` (default) draws them fresh.
     :param max_episode_steps: Longest episode training runs, in env steps (an episode reaching it is truncated);

@@ -1,0 +1,322 @@
+"""The NumPy network that evaluators run: a small picklable spec, and its batched forward pass.
+
+A :class:`NetworkSpec` holds everything needed to turn observations into actions for any parameter vector: the
+observation and action spaces, where each layer's parameters lie in the flat vector, the activations, and a
+snapshot of the observation statistics. It knows nothing of torch modules or SB3: the policy
+(:class:`sb3_es.common.policies.FlatPolicy`) builds one, ``predict()`` runs it, and evaluators (in this process,
+in worker processes, on Ray actors) receive it, so every path computes the same actions with the same code.
+
+Its forward pass is batched over candidates: row ``k`` of the observations goes through the network whose
+parameters are row ``k`` of a population matrix (NumPy's batched matrix-vector product, much faster than torch
+for these small networks).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+from dataclasses import dataclass
+from functools import cached_property
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+import torch as th
+from gymnasium import spaces
+from stable_baselines3.common.preprocessing import get_flattened_obs_dim, preprocess_obs
+
+#: Variance floor used when normalizing observations (same as SB3's ``VecNormalize``).
+OBS_NORM_EPS = 1e-8
+
+#: A layer's parameters in the flat vector: ``(start, stop, shape)``.
+ParamSlice = tuple[int, int, tuple[int, ...]]
+
+
+#: Observation spaces a network takes, alone or as the entries of a ``Dict``.
+FLAT_OBS_SPACES = (spaces.Box, spaces.Discrete, spaces.MultiDiscrete, spaces.MultiBinary)
+
+
+def flat_obs_dim(observation_space: spaces.Space) -> int:
+    """
+    Size of the flattened observation vector, or a clear error for a space that cannot be flattened.
+
+    :param observation_space: A ``Box``, ``Discrete``, ``MultiDiscrete`` or ``MultiBinary`` space, or a ``Dict`` of
+        them (e.g. dm_control through shimmy). Discrete entries count one input per value (one-hot).
+    :return: Number of scalars in one flattened observation.
+    """
+    if isinstance(observation_space, spaces.Dict):
+        bad = {k: type(s).__name__ for k, s in observation_space.spaces.items() if not isinstance(s, FLAT_OBS_SPACES)}
+        if bad:
+            raise ValueError(
+                f"Unsupported observation space: Dict entries {bad} are not Box, Discrete, MultiDiscrete or "
+                "MultiBinary spaces; wrap the env with gymnasium.wrappers.FlattenObservation."
+            )
+        return sum(int(get_flattened_obs_dim(s)) for s in observation_space.spaces.values())
+    if isinstance(observation_space, FLAT_OBS_SPACES):
+        return int(get_flattened_obs_dim(observation_space))
+    raise ValueError(
+        f"Unsupported observation space {observation_space}: sb3-es policies take Box, Discrete, MultiDiscrete and "
+        "MultiBinary observations, or a Dict of them. Wrap the env with gymnasium.wrappers.FlattenObservation "
+        "(Tuple, ...) or a TransformObservation that produces a Box."
+    )
+
+
+def _flatten_entry(obs: np.ndarray, space: spaces.Space) -> np.ndarray:
+    """
+    :param obs: A batch of observations of ``space``.
+    :param space: The space: a ``Box`` is flattened; other spaces go through SB3's ``preprocess_obs`` (one-hot).
+    :return: ``(n, flat_dim)`` observations.
+    """
+    obs = np.asarray(obs)
+    if not isinstance(space, spaces.Box):
+        obs = preprocess_obs(th.as_tensor(obs), space, normalize_images=False).numpy()  # type: ignore[union-attr]
+    return obs.reshape(obs.shape[0], -1)
+
+
+def flatten_obs(observation_space: spaces.Space, obs: np.ndarray | dict[str, np.ndarray]) -> np.ndarray:
+    """
+    Flatten a batch of observations to ``(n, obs_dim)`` float32 (discrete ones one-hot, as SB3 does).
+
+    :param observation_space: The observation space (``Dict`` entries are concatenated in its key order).
+    :param obs: Array, or dict of arrays for ``Dict`` spaces, with a leading batch dimension.
+    :return: Flattened observations.
+    """
+    if isinstance(observation_space, spaces.Dict):
+        assert isinstance(obs, dict)
+        parts = [_flatten_entry(obs[key], subspace) for key, subspace in observation_space.spaces.items()]
+        return np.concatenate(parts, axis=1).astype(np.float32, copy=False)
+    return _flatten_entry(obs, observation_space).astype(np.float32, copy=False)  # type: ignore[arg-type]
+
+
+# ---------------------------------------------------------------------------------------------------- layers
+@dataclass(frozen=True)
+class Linear:
+    """
+    ``x -> W x + b`` for each row's own ``W`` and ``b``.
+
+    :param weight: Where ``W`` lies in the flat vector.
+    :param bias: Where ``b`` lies, or ``None`` for no bias.
+    """
+
+    weight: ParamSlice
+    bias: ParamSlice | None = None
+
+
+@dataclass(frozen=True)
+class LayerNorm:
+    """
+    Layer normalization over the features, with each row's own gain and bias (as ``torch.nn.LayerNorm``).
+
+    :param gain: Where the gain lies in the flat vector.
+    :param bias: Where the bias lies.
+    :param eps: Variance floor.
+    """
+
+    gain: ParamSlice
+    bias: ParamSlice
+    eps: float
+
+
+def relu(x: np.ndarray) -> np.ndarray:
+    """:return: ``max(x, 0)``."""
+    return np.maximum(x, 0)
+
+
+def sigmoid(x: np.ndarray) -> np.ndarray:
+    """:return: ``1 / (1 + exp(-x))``."""
+    return 1 / (1 + np.exp(-x))
+
+
+def identity(x: np.ndarray) -> np.ndarray:
+    """:return: ``x``."""
+    return x
+
+
+@dataclass(frozen=True)
+class Activation:
+    """
+    An element-wise function without parameters.
+
+    :param fn: A picklable function of a NumPy array (:func:`relu`, ``np.tanh``, ..., or a
+        :class:`TorchActivation` for other torch activation modules).
+    """
+
+    fn: Callable[[np.ndarray], np.ndarray]
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        return self.fn(x).astype(x.dtype, copy=False)
+
+
+class TorchActivation:
+    """
+    A torch activation module applied to a NumPy array, for activations without a NumPy version here.
+
+    :param module: The module (e.g. ``torch.nn.ELU()``); it must be picklable.
+    """
+
+    def __init__(self, module: object) -> None:
+        self.module = module
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        with th.no_grad():
+            return self.module(th.from_numpy(np.ascontiguousarray(x))).numpy()  # type: ignore[operator]
+
+
+Layer = Linear | LayerNorm | Activation
+
+#: NumPy versions of torch activation modules, by class name (``nn.ReLU`` -> ``"ReLU"``).
+NUMPY_ACTIVATIONS: dict[str, Callable[[np.ndarray], np.ndarray]] = {
+    "ReLU": relu,
+    "Tanh": np.tanh,
+    "Sigmoid": sigmoid,
+    "Identity": identity,
+}
+
+
+def activation_for(module: object) -> Activation:
+    """
+    :param module: A torch activation module without parameters.
+    :return: Its NumPy version when there is one, else a :class:`TorchActivation` around it.
+    """
+    fast = NUMPY_ACTIVATIONS.get(type(module).__name__) if type(module).__module__.startswith("torch.") else None
+    return Activation(fast if fast is not None else TorchActivation(module))
+
+
+# ---------------------------------------------------------------------------------------------------- the spec
+@dataclass(frozen=True, eq=False)
+class NetworkSpec:
+    """
+    A deterministic network over flat parameter vectors, with frozen observation statistics (picklable).
+
+    Actions: for ``Discrete`` spaces the argmax of the outputs; for ``Box`` spaces the outputs rescaled from
+    ``[-1, 1]`` to the bounds when ``squash_output`` (the last layer is then a ``tanh``), else clipped to them.
+
+    :param observation_space: The observation space (``Box``, ``Discrete``, ``MultiDiscrete``, ``MultiBinary``, or a
+        ``Dict`` of them).
+    :param action_space: The action space (``Box`` with finite bounds, or ``Discrete``).
+    :param layers: The layers, in order.
+    :param num_params: Length of a parameter vector.
+    :param squash_output: Whether ``Box`` outputs are in ``[-1, 1]`` and rescaled (else clipped).
+    :param obs_mean: Mean of the observations (float64), or ``None`` for no normalization.
+    :param obs_var: Their variance (float64), or ``None``.
+    """
+
+    observation_space: spaces.Space
+    action_space: spaces.Space
+    layers: tuple[Layer, ...]
+    num_params: int
+    squash_output: bool = False
+    obs_mean: np.ndarray | None = None
+    obs_var: np.ndarray | None = None
+
+    @property
+    def obs_dim(self) -> int:
+        """:return: Size of a flattened observation."""
+        return flat_obs_dim(self.observation_space)
+
+    @property
+    def normalizes(self) -> bool:
+        """:return: Whether observations are normalized with the statistics."""
+        return self.obs_mean is not None
+
+    def with_obs_stats(self, mean: np.ndarray | None, var: np.ndarray | None) -> NetworkSpec:
+        """
+        :param mean: Observation mean, or ``None`` for no normalization.
+        :param var: Observation variance.
+        :return: The same network with these statistics.
+        """
+        return dataclasses.replace(self, obs_mean=mean, obs_var=var)
+
+    def output_layer_slice(self) -> slice:
+        """:return: Where the last linear layer's weight and bias lie in the flat vector."""
+        last = [layer for layer in self.layers if isinstance(layer, Linear)][-1]
+        stop = last.bias[1] if last.bias is not None else last.weight[1]
+        return slice(last.weight[0], stop)
+
+    def flatten_obs(self, obs: np.ndarray | dict[str, np.ndarray]) -> np.ndarray:
+        """
+        :param obs: A batch of observations (array, or dict of arrays for ``Dict`` spaces).
+        :return: Flattened observations ``(n, obs_dim)``, float32.
+        """
+        return flatten_obs(self.observation_space, obs)
+
+    @cached_property
+    def _normalizer(self) -> tuple[np.ndarray, np.ndarray] | None:
+        if self.obs_mean is None or self.obs_var is None:
+            return None
+        mean = np.asarray(self.obs_mean).astype(np.float32)
+        inv_std = (1.0 / np.sqrt(np.asarray(self.obs_var) + OBS_NORM_EPS)).astype(np.float32)
+        return mean, inv_std
+
+    def normalize(self, flat_obs: np.ndarray) -> np.ndarray:
+        """
+        :param flat_obs: Flattened observations ``(n, obs_dim)``.
+        :return: Normalized observations, float32 (unchanged without statistics).
+        """
+        if self._normalizer is None:
+            return flat_obs
+        mean, inv_std = self._normalizer
+        return (flat_obs - mean) * inv_std
+
+    def forward(self, params: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """
+        Raw outputs, where row ``k`` of ``x`` goes through the network of parameter row ``k``.
+
+        :param params: Parameters ``(k, num_params)`` or ``(1, num_params)`` (broadcast), float32.
+        :param x: Normalized observations ``(k, obs_dim)``, float32.
+        :return: Outputs ``(k, output_dim)``.
+        """
+        x = x[:, :, None]  # (k, features, 1)
+        for layer in self.layers:
+            if isinstance(layer, Linear):
+                w0, w1, w_shape = layer.weight
+                x = np.matmul(params[:, w0:w1].reshape(-1, *w_shape), x)
+                if layer.bias is not None:
+                    x = x + params[:, layer.bias[0] : layer.bias[1], None]
+            elif isinstance(layer, LayerNorm):
+                mean = x.mean(axis=1, keepdims=True)
+                var = x.var(axis=1, keepdims=True)
+                (g0, g1, _), (b0, b1, _) = layer.gain, layer.bias
+                x = (x - mean) / np.sqrt(var + layer.eps) * params[:, g0:g1, None] + params[:, b0:b1, None]
+            else:
+                x = layer(x)
+        return x[:, :, 0]
+
+    @cached_property
+    def _action_bounds(self) -> tuple[tuple[int, ...], np.ndarray, np.ndarray]:
+        assert isinstance(self.action_space, spaces.Box)
+        return self.action_space.shape, self.action_space.low, self.action_space.high
+
+    def __call__(self, params: np.ndarray, flat_obs: np.ndarray) -> np.ndarray:
+        """
+        Env actions of a population: row ``k`` of ``flat_obs`` through the network of parameter row ``k``.
+
+        :param params: Parameters ``(k, num_params)`` (or one row, broadcast), float32.
+        :param flat_obs: Flattened raw observations ``(k, obs_dim)`` (see :meth:`flatten_obs`).
+        :return: Env actions: argmax for ``Discrete``; for ``Box``, outputs rescaled to the bounds (as SB3's
+            ``unscale_action``) or clipped to them.
+        """
+        out = self.forward(params, self.normalize(flat_obs))
+        if isinstance(self.action_space, spaces.Discrete):
+            return out.argmax(axis=1)
+        shape, low, high = self._action_bounds
+        actions = out.reshape((-1, *shape))
+        if self.squash_output:
+            return low + (0.5 * (actions + 1.0) * (high - low))
+        return np.clip(actions, low, high)
+
+
+@runtime_checkable
+class HasNetworkSpec(Protocol):
+    """Anything that can give its network spec (e.g. a :class:`~sb3_es.common.policies.FlatPolicy`)."""
+
+    def network_spec(self) -> NetworkSpec:
+        """:return: The network with its current observation statistics."""
+        ...
+
+
+def as_network(network: NetworkSpec | HasNetworkSpec) -> NetworkSpec:
+    """
+    :param network: A spec, or an object with a ``network_spec()`` method (a policy).
+    :return: The spec.
+    """
+    return network if isinstance(network, NetworkSpec) else network.network_spec()

@@ -1,0 +1,375 @@
+"""Population evaluation on persistent worker processes of this machine (standard library only).
+
+Local processes host the workers of a :class:`~sb3_es.evaluation.sharded.ShardedEvaluator`, as Ray actors do for
+:class:`~sb3_es.evaluation.ray.RayEvaluator`: each process owns a VecEnv and runs whole episodes of its share with
+the local engine, so a generation costs one round trip per worker, not one per vec step as with ``SubprocVecEnv``.
+
+Transport: one ``multiprocessing`` pipe per worker carries the calls (the generation's payload is pickled once,
+with ``cloudpickle`` as SB3's ``SubprocVecEnv`` does for env factories, so lambdas are fine)
+and the replies; a shared integer per worker ends the lingering (read at every vec step, without a system call).
+Workers are started with ``fork`` on Linux (no imports to repeat: startup in well under a second) and ``spawn``
+elsewhere; they ignore ``SIGINT`` (the driver stops them on ``KeyboardInterrupt``), exit when the driver's end of
+their pipe closes, and are daemons, so that none outlives the driver.
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import os
+import pickle
+import signal
+import sys
+import time
+import traceback
+import weakref
+from collections.abc import Callable, Sequence
+from multiprocessing.connection import Connection, wait
+from typing import Any
+
+import cloudpickle
+import gymnasium as gym
+import numpy as np
+from stable_baselines3.common.vec_env import VecEnv
+
+from sb3_es.evaluation.sharded import ShardedEvaluator, WorkerDied, WorkerPool
+from sb3_es.evaluation.worker import ShareRunner, env_config
+from sb3_es.strategies.noise import SharedNoiseTable
+
+#: The driver's ends of every worker pipe of this process: a forked worker closes its copies, so that a worker
+#: sees the end of its pipe when the driver goes away.
+_DRIVER_ENDS: weakref.WeakSet[Connection] = weakref.WeakSet()
+
+
+class RemoteTraceback(Exception):
+    """The traceback of an exception raised in a worker process (set as the ``__cause__`` of the re-raised one)."""
+
+    def __init__(self, tb: str) -> None:
+        super().__init__(tb)
+        self.tb = tb
+
+    def __str__(self) -> str:
+        return f'\n"""\n{self.tb}"""'
+
+
+def _worker_main(conn: Connection, config: bytes, stop: Any, tables: list[SharedNoiseTable]) -> None:
+    """Body of a worker process: build the envs, then serve calls until the driver says so or goes away."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the driver stops its workers on Ctrl-C
+    for end in list(_DRIVER_ENDS):  # copies inherited by fork
+        end.close()
+
+    def reply(*message: Any) -> None:
+        try:
+            conn.send(message)
+        except (pickle.PicklingError, TypeError, AttributeError) as e:  # e.g. an info value that does not pickle
+            error = RuntimeError(f"The worker's {message[0]!r} reply could not be sent to the driver: {e}")
+            conn.send(("error", error, traceback.format_exc()))
+
+    def serve(runner: ShareRunner, kind: str, args: Any) -> None:
+        if kind == "run":
+            payload, candidates, seed, token = args
+            payload = cloudpickle.loads(payload)
+            if token is None:
+                reply("result", runner.run(payload, candidates, seed))
+                return
+
+            def share_done() -> None:
+                conn.send(("done", token))
+
+            reply("result", runner.run(payload, candidates, seed, share_done, lambda: stop.value != token))
+        elif kind == "table":
+            runner.noise_tables[args.key] = args.noise
+        elif kind == "call":
+            reply("result", cloudpickle.loads(args)(runner.env))
+
+    try:
+        try:
+            runner = ShareRunner(cloudpickle.loads(config))
+        except Exception as e:  # e.g. an unknown env id
+            reply("error", e, traceback.format_exc())
+            return
+        for table in tables:
+            runner.noise_tables[table.key] = table.noise
+        reply("ready", runner.env.num_envs)
+        while True:
+            try:
+                kind, args = conn.recv()
+            except (EOFError, OSError):  # the driver is gone
+                return
+            if kind == "exit":
+                return
+            try:
+                serve(runner, kind, args)
+            except Exception as e:
+                reply("error", e, traceback.format_exc())
+    except (BrokenPipeError, ConnectionResetError):  # the driver is gone
+        return
+
+
+class ProcessPool(WorkerPool):
+    """
+    Worker processes running a :class:`~sb3_es.evaluation.worker.ShareRunner` each.
+
+    :param config: Env config of every worker.
+    :param num_workers: Number of processes.
+    :param start_method: ``multiprocessing`` start method.
+    :param start_timeout: Seconds to wait for a worker to build its envs.
+    """
+
+    def __init__(self, config: dict[str, Any], num_workers: int, start_method: str, start_timeout: float) -> None:
+        self.config = cloudpickle.dumps(config)  # env factories may be lambdas
+        self.size = self.num_workers = num_workers
+        self.envs_per_worker = int(config["n_envs"])
+        self.start_timeout = start_timeout
+        self._ctx: Any = mp.get_context(start_method)
+        self.processes: list[Any] = []
+        self._conns: list[Any] = []
+        self._stops: list[Any] = []
+        self._tables: list[set[tuple[int, int]]] = []
+        self._known_tables: dict[tuple[int, int], SharedNoiseTable] = {}
+        self._inbox: dict[int, tuple[Any, ...]] = {}  # a share's reply received while waiting for "done"
+
+    @property
+    def started(self) -> bool:
+        return bool(self.processes)
+
+    def start(self) -> None:
+        if self.processes:
+            return
+        n = self.num_workers
+        self.processes, self._conns = [None] * n, [None] * n
+        self._stops = [self._ctx.RawValue("q", 0) for _ in range(n)]
+        self._tables = [set() for _ in range(n)]
+        try:
+            for k in range(n):
+                self._spawn(k)
+            deadline = time.monotonic() + self.start_timeout
+            for k in range(n):
+                self._wait_ready(k, deadline)
+        except BaseException:
+            self.close()
+            raise
+
+    def _spawn(self, k: int) -> None:
+        driver_end, worker_end = self._ctx.Pipe()
+        tables = list(self._known_tables.values())
+        process = self._ctx.Process(
+            target=_worker_main,
+            args=(worker_end, self.config, self._stops[k], tables),
+            name=f"sb3-es-worker-{k}",
+            daemon=True,
+        )
+        _DRIVER_ENDS.add(driver_end)
+        process.start()
+        worker_end.close()
+        self.processes[k], self._conns[k] = process, driver_end
+        self._tables[k] = set(self._known_tables)
+
+    def _wait_ready(self, k: int, deadline: float) -> None:
+        try:
+            kind, *rest = self._receive(k, max(0.0, deadline - time.monotonic()))
+        except TimeoutError as e:
+            raise RuntimeError(
+                f"Worker process {k} did not build its envs within start_timeout={self.start_timeout:g} s "
+                "(raise start_timeout for envs that are slow to build)."
+            ) from e
+        except WorkerDied as e:
+            raise RuntimeError(f"Worker process {k} ended while building its envs ({e}).") from e
+        if kind == "error":
+            _raise_remote(*rest)
+
+    def _receive(self, k: int, timeout: float | None) -> tuple[Any, ...]:
+        """:return: Worker ``k``'s next message. :raises WorkerDied: if it ended; ``TimeoutError``."""
+        conn, process = self._conns[k], self.processes[k]
+        if not wait([conn, process.sentinel], timeout):
+            raise TimeoutError(f"worker process {k} did not reply within {timeout} s")
+        try:
+            if conn.poll():
+                return conn.recv()
+        except (EOFError, OSError):
+            pass
+        process.join(1.0)
+        raise WorkerDied(f"worker process {process.pid} ended with exit code {process.exitcode}")
+
+    def close(self) -> None:
+        for k, process in enumerate(self.processes):
+            if process is None:
+                continue
+            if process.is_alive():
+                process.kill()  # SIGKILL: a worker may be in the middle of an episode, or stuck in the env
+            process.join(5.0)
+            conn = self._conns[k]
+            if conn is not None:
+                conn.close()
+                _DRIVER_ENDS.discard(conn)
+        self.processes, self._conns, self._stops, self._tables, self._inbox = [], [], [], [], {}
+
+    def publish(self, payload: dict[str, Any]) -> Any:
+        return cloudpickle.dumps(payload, protocol=pickle.HIGHEST_PROTOCOL)
+
+    def _send(self, k: int, message: tuple[str, Any]) -> None:
+        try:
+            self._conns[k].send(message)
+        except (BrokenPipeError, ConnectionResetError, EOFError) as e:
+            raise WorkerDied(f"worker process {self.processes[k].pid} is gone ({type(e).__name__})") from e
+
+    def submit(
+        self, k: int, handle: Any, candidates: np.ndarray, seed: int, token: int | None, table: SharedNoiseTable | None
+    ) -> None:
+        if table is not None:
+            self._known_tables[table.key] = table
+            if table.key not in self._tables[k]:
+                self._send(k, ("table", table))  # pickled as its size and seed: rebuilt in the worker
+                self._tables[k].add(table.key)
+        self._inbox.pop(k, None)
+        self._send(k, ("run", (handle, candidates, seed, token)))
+
+    def wait_share_done(self, ks: Sequence[int], timeout: float | None) -> tuple[int, WorkerDied | None]:
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while True:
+            for k in ks:
+                if k in self._inbox:
+                    return k, None
+            remaining = None if deadline is None else max(0.0, deadline - time.monotonic())
+            handles = {self._conns[k]: k for k in ks} | {self.processes[k].sentinel: k for k in ks}
+            ready = wait(list(handles), remaining)
+            if not ready:
+                raise TimeoutError(f"no worker process finished its share within {timeout} s")
+            k = handles[ready[0]]
+            try:
+                message = self._receive(k, 0)
+            except WorkerDied as e:
+                return k, e
+            if message[0] == "done":
+                return k, None
+            self._inbox[k] = message  # its result (or error) came with no "done" (an error before the share began)
+
+    def stop_lingering(self, k: int, token: int) -> None:
+        self._stops[k].value = token
+
+    def result(self, k: int, timeout: float | None) -> dict[str, Any]:
+        deadline = None if timeout is None else time.monotonic() + timeout
+        message = self._inbox.pop(k, None)
+        while message is None or message[0] == "done":
+            message = self._receive(k, None if deadline is None else max(0.0, deadline - time.monotonic()))
+        if message[0] == "error":
+            _raise_remote(*message[1:])
+        return message[1]
+
+    def replace(self, k: int) -> None:
+        process = self.processes[k]
+        if process.is_alive():
+            process.kill()
+        process.join(5.0)
+        self._conns[k].close()
+        _DRIVER_ENDS.discard(self._conns[k])
+        self._inbox.pop(k, None)
+        self._stops[k] = self._ctx.RawValue("q", 0)
+        self._spawn(k)
+        self._wait_ready(k, time.monotonic() + self.start_timeout)
+
+    def call(self, fn: Callable[[VecEnv], Any]) -> list[Any]:
+        for k in range(self.num_workers):
+            self._send(k, ("call", cloudpickle.dumps(fn)))
+        return [self.result(k, None) for k in range(self.num_workers)]
+
+
+def _raise_remote(error: BaseException, tb: str) -> None:
+    """Raise an exception from a worker, with the worker's traceback as its cause."""
+    raise error from RemoteTraceback(tb)
+
+
+def default_start_method() -> str:
+    """:return: ``"fork"`` on Linux (fast start, nothing to import again), else ``"spawn"``."""
+    return "fork" if sys.platform.startswith("linux") else "spawn"
+
+
+def usable_cpus() -> int:
+    """:return: The CPUs this process may run on."""
+    if hasattr(os, "sched_getaffinity"):
+        return len(os.sched_getaffinity(0))
+    return os.cpu_count() or 1
+
+
+class ProcessEvaluator(ShardedEvaluator):
+    """
+    Evaluates a population on persistent worker processes of this machine, each owning a VecEnv and running its
+    share of the jobs with :class:`~sb3_es.evaluation.VecEnvEvaluator` (whole episodes inside the worker).
+
+    Same driver as :class:`~sb3_es.evaluation.ray.RayEvaluator` (:class:`~sb3_es.evaluation.sharded.ShardedEvaluator`):
+    shares, seeds (share ``k`` uses ``seed + k * envs_per_worker``), lingering, callback replay, replacement of a
+    worker that dies (its share re-run), exact merge of the observation statistics. With a given seed and
+    ``num_workers``, the candidates' returns and so the parameters are reproducible; ``num_timesteps`` also counts
+    the center-policy steps of lingering workers, which depend on timing (``linger=False`` makes them
+    reproducible too, at the cost of idle workers at the end of each generation).
+
+    An exception raised by the env in a worker is raised in the driver with the worker's traceback as its cause;
+    an error or ``KeyboardInterrupt`` during a generation kills the workers (fresh ones start at the next
+    evaluation). The workers are stopped by :meth:`close`, the ``with`` statement, garbage collection of the
+    evaluator, or the driver's exit. Not saved with the model.
+
+    :param env: Env id or a picklable env factory (a class, function or lambda returning a ``gym.Env``; with the
+        ``spawn`` start method it must be importable).
+    :param num_workers: Number of worker processes; by default one per CPU this process may use.
+    :param envs_per_worker: Env slots of each worker's VecEnv.
+    :param wrapper_class: Wrapper applied to each env after ``Monitor`` (as ``make_vec_env``).
+    :param env_kwargs: Keyword arguments for ``gym.make`` or the factory.
+    :param wrapper_kwargs: Keyword arguments for ``wrapper_class``.
+    :param vec_env_cls: VecEnv class of each worker (``DummyVecEnv`` by default).
+    :param vec_env_kwargs: Keyword arguments for ``vec_env_cls``.
+    :param monitor_kwargs: Keyword arguments for ``Monitor``.
+    :param start_method: ``multiprocessing`` start method; by default ``"fork"`` on Linux, else ``"spawn"``.
+    :param max_worker_restarts: Worker replacements allowed within one generation.
+    :param start_timeout: Seconds to wait for a worker to build its envs.
+    :param generation_timeout: Seconds a generation may take (``None``: no limit).
+    :param linger: Whether a worker whose share is done runs the center policy until every share is done.
+    """
+
+    worker_name = "worker process"
+    restarts_argument = "max_worker_restarts"
+
+    def __init__(
+        self,
+        env: str | Callable[..., gym.Env],
+        num_workers: int | None = None,
+        envs_per_worker: int = 1,
+        wrapper_class: Callable[[gym.Env], gym.Env] | None = None,
+        env_kwargs: dict[str, Any] | None = None,
+        wrapper_kwargs: dict[str, Any] | None = None,
+        vec_env_cls: type[VecEnv] | None = None,
+        vec_env_kwargs: dict[str, Any] | None = None,
+        monitor_kwargs: dict[str, Any] | None = None,
+        start_method: str | None = None,
+        max_worker_restarts: int = 3,
+        start_timeout: float = 60.0,
+        generation_timeout: float | None = None,
+        linger: bool = True,
+    ) -> None:
+        super().__init__(max_worker_restarts, generation_timeout, linger)
+        self._env_config = env_config(
+            env, envs_per_worker, wrapper_class, env_kwargs, wrapper_kwargs, vec_env_cls, vec_env_kwargs, monitor_kwargs
+        )
+        if num_workers is not None and (int(num_workers) != num_workers or num_workers < 1):
+            raise ValueError(f"num_workers={num_workers}: it must be a positive integer.")
+        start_method = start_method or default_start_method()
+        if start_method not in mp.get_all_start_methods():
+            raise ValueError(f"start_method={start_method!r}: use one of {mp.get_all_start_methods()}.")
+        if not start_timeout > 0:
+            raise ValueError(f"start_timeout={start_timeout}: give a positive number of seconds.")
+        self.env = env
+        self.num_workers = usable_cpus() if num_workers is None else int(num_workers)
+        self.envs_per_worker = int(envs_per_worker)
+        self.start_method = start_method
+        self.start_timeout = float(start_timeout)
+
+    @property
+    def _workers(self) -> list[Any]:
+        """:return: The running worker processes (empty before the start and after :meth:`close`)."""
+        return list(self._pool.processes) if isinstance(self._pool, ProcessPool) else []
+
+    def _acquire_pool(self) -> tuple[WorkerPool, Callable[[], None]]:
+        pool = ProcessPool(self._env_config, self.num_workers, self.start_method, self.start_timeout)
+        return pool, pool.close
+
+    def __enter__(self) -> ProcessEvaluator:
+        self.start()
+        return self

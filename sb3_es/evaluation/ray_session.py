@@ -1,0 +1,148 @@
+"""Ray's lifetime in this process, and the actor pools that Ray evaluators share.
+
+* Ray is started (``ray.init``) by the first evaluator that needs it if it is not running, and shut down when the
+  last pool is released, only if it was started here.
+* Evaluators with the same env config, layout and CPU request share one pool of actors: a seed loop or a
+  notebook re-run of ``ARS(..., evaluator="ray")`` reuses the running actors instead of waiting for CPUs that the
+  previous model's actors hold. A pool is released (its actors killed) when the last evaluator using it is closed
+  or garbage-collected.
+* When actors of a new pool do not fit in the free CPUs, idle pools of this process (no generation in flight) are
+  stopped to make room; they start again when their evaluator next runs.
+
+Ray itself is imported only when an evaluator is created.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import time
+from collections.abc import Callable
+from typing import Any, Protocol
+
+logger = logging.getLogger(__name__)
+
+
+class SharedPool(Protocol):
+    """What the session needs of a pool of actors."""
+
+    busy: bool
+
+    @property
+    def started(self) -> bool: ...
+
+    @property
+    def cpus(self) -> float:
+        """:return: The CPUs its running actors hold."""
+        ...
+
+    def close(self) -> None: ...
+
+
+_pools: dict[bytes, SharedPool] = {}
+_users: dict[int, int] = {}  # id(pool) -> number of evaluators using it
+_started_here = False
+
+
+def import_ray() -> Any:
+    """:return: The ``ray`` module, or a clear error explaining how to install it."""
+    try:
+        import ray
+    except ImportError as e:  # pragma: no cover - depends on the environment
+        raise ImportError(
+            "RayEvaluator needs Ray: install it with `pip install sb3-es[ray]` (or `pip install ray`)."
+        ) from e
+    return ray
+
+
+def ensure_started(init_kwargs: dict[str, Any]) -> Any:
+    """
+    Start Ray with ``ray.init(**init_kwargs)`` unless it is running.
+
+    :return: The ``ray`` module.
+    """
+    global _started_here
+    ray = import_ray()
+    if not ray.is_initialized():
+        ray.init(**{"ignore_reinit_error": True, **init_kwargs})
+        _started_here = True
+    return ray
+
+
+def acquire(key: bytes, factory: Callable[[], SharedPool]) -> SharedPool:
+    """
+    :param key: Identifies what the pool runs (env config, layout, CPU request).
+    :param factory: Builds a new pool (without starting it) when none has this key.
+    :return: The pool for ``key``, now counted as used once more (:func:`release` it).
+    """
+    pool = _pools.get(key)
+    if pool is None:
+        pool = _pools[key] = factory()
+    _users[id(pool)] = _users.get(id(pool), 0) + 1
+    return pool
+
+
+def release(key: bytes, pool: SharedPool) -> None:
+    """
+    One evaluator no longer uses ``pool``: when none does, kill its actors, and shut Ray down if it was started
+    here and no pool is left. Safe at interpreter exit and from a garbage-collection finalizer.
+    """
+    global _started_here
+    count = _users.get(id(pool), 0) - 1
+    if count > 0:
+        _users[id(pool)] = count
+        return
+    _users.pop(id(pool), None)
+    if _pools.get(key) is pool:
+        del _pools[key]
+    with contextlib.suppress(Exception):  # Ray may be shutting down already
+        pool.close()
+    if _started_here and not _pools:
+        with contextlib.suppress(Exception):
+            ray = import_ray()
+            if ray.is_initialized():
+                ray.shutdown()
+        _started_here = False
+
+
+def free_cpus() -> float:
+    """:return: CPUs that the Ray cluster has free now."""
+    return float(import_ray().available_resources().get("CPU", 0.0))
+
+
+def make_room(cpus: float, requester: SharedPool, wait_s: float = 10.0) -> float:
+    """
+    Stop idle pools of this process (oldest first) until ``cpus`` CPUs are free or none is left to stop.
+
+    :param cpus: CPUs needed.
+    :param requester: The pool asking (never stopped).
+    :param wait_s: How long to wait for Ray to report the CPUs of killed actors as free.
+    :return: The CPUs free afterwards.
+    """
+    free = free_cpus()
+    for pool in list(_pools.values()):
+        if free >= cpus:
+            break
+        if pool is requester or pool.busy or not pool.started:
+            continue
+        held = pool.cpus
+        pool.close()
+        logger.warning(
+            "Stopped %g idle Ray actor CPU(s) of another evaluator in this process to make room for a new one; they "
+            "start again when that evaluator next runs (close() evaluators you no longer use).",
+            held,
+        )
+        deadline = time.monotonic() + wait_s
+        while free_cpus() < min(cpus, free + held) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        free = free_cpus()
+    return free
+
+
+def describe_pools() -> str:
+    """:return: What this process's pools hold, for error messages."""
+    running = [pool for pool in _pools.values() if pool.started]
+    if not running:
+        return "no other Ray evaluator of this process holds actors"
+    held = sum(pool.cpus for pool in running)
+    return f"Ray evaluators of this process hold {held:g} CPU(s) in {len(running)} pool(s)"

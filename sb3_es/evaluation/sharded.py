@@ -1,0 +1,387 @@
+"""The driver side of evaluating a population on several workers, whatever hosts them (Ray actors, processes).
+
+A :class:`ShardedEvaluator` cuts a generation's (candidate, episode) jobs into one share per worker, has every
+worker run its share with the local engine (see :mod:`sb3_es.evaluation.worker`), keeps finished workers busy on
+the center policy until every share is done (lingering), replaces a worker that dies and re-runs its share, merges
+the results (observation statistics by Chan's parallel algorithm), replays the callbacks and records timings. The
+host is a :class:`WorkerPool`: it starts the workers and carries the calls and signals, nothing else.
+"""
+
+from __future__ import annotations
+
+import itertools
+import logging
+import time
+import weakref
+from abc import ABC, abstractmethod
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+from stable_baselines3.common.vec_env import VecEnv
+
+from sb3_es.evaluation.base import PopulationEvaluator, PopulationResult, StepHook
+from sb3_es.evaluation.network import HasNetworkSpec, NetworkSpec, as_network
+from sb3_es.evaluation.shaping import RewardShaping
+from sb3_es.strategies.noise import NoiseTablePopulation, SharedNoiseTable
+
+logger = logging.getLogger(__name__)
+
+#: Names the lingering signals of each generation (unique in the process, shared pools included).
+_TOKENS = itertools.count(1)
+
+
+class WorkerDied(Exception):
+    """A worker ended (process killed, node lost, crash in native code) before it returned its share."""
+
+
+class WorkerPool(ABC):
+    """
+    The host of a sharded evaluator's workers: each worker owns a VecEnv and runs shares with the local engine.
+
+    Every blocking call takes a timeout (seconds, ``None`` for none) and raises ``TimeoutError`` when it passes.
+    """
+
+    #: Number of workers once started (``None`` before, when it is resolved at start).
+    size: int | None
+    #: Env slots of each worker's VecEnv.
+    envs_per_worker: int
+    #: True while a generation is in flight (a shared pool is then not released to make room for another).
+    busy: bool = False
+
+    @property
+    @abstractmethod
+    def started(self) -> bool:
+        """:return: Whether the workers are running."""
+
+    @abstractmethod
+    def start(self) -> None:
+        """Create the workers if there are none and wait until they are ready (raise a clear error on timeout)."""
+
+    @abstractmethod
+    def close(self) -> None:
+        """Stop every worker (a later :meth:`start` creates fresh ones)."""
+
+    @abstractmethod
+    def publish(self, payload: dict[str, Any]) -> Any:
+        """:return: A handle on the generation's payload, passed to :meth:`submit` (e.g. a Ray object reference)."""
+
+    @abstractmethod
+    def submit(
+        self, k: int, handle: Any, candidates: np.ndarray, seed: int, token: int | None, table: SharedNoiseTable | None
+    ) -> None:
+        """
+        Start worker ``k`` on a share (sending it the noise table first if it lacks it).
+
+        :param token: The generation's token if the worker should linger (see :class:`~.worker.ShareRunner`).
+        :raises WorkerDied: If the worker is dead.
+        """
+
+    @abstractmethod
+    def wait_share_done(self, ks: Sequence[int], timeout: float | None) -> tuple[int, WorkerDied | None]:
+        """
+        Wait until one of the lingering workers ``ks`` has finished its share (or failed), or died.
+
+        :return: The worker, and the error if it died.
+        """
+
+    @abstractmethod
+    def stop_lingering(self, k: int, token: int) -> None:
+        """Tell worker ``k`` to end generation ``token``'s lingering."""
+
+    @abstractmethod
+    def result(self, k: int, timeout: float | None) -> dict[str, Any]:
+        """
+        :return: Worker ``k``'s output for its share (see :meth:`~.worker.ShareRunner.run`).
+        :raises WorkerDied: If it died; an exception raised in the worker is raised here.
+        """
+
+    @abstractmethod
+    def replace(self, k: int) -> None:
+        """Stop worker ``k`` if it still runs and start a new one in its place."""
+
+    @abstractmethod
+    def call(self, fn: Callable[[VecEnv], Any]) -> list[Any]:
+        """:return: ``fn(vec_env)`` run in every worker, in worker order."""
+
+
+def _remaining(deadline: float | None) -> float | None:
+    return None if deadline is None else max(0.0, deadline - time.monotonic())
+
+
+class ShardedEvaluator(PopulationEvaluator, ABC):
+    """
+    Evaluates a population on the workers of a :class:`WorkerPool`, each running its share with the local engine.
+
+    Shares: the generation's (candidate, episode) jobs, ordered episode by episode as in the local engine, are cut
+    into ``num_workers`` contiguous shares of nearly equal size; share ``k`` runs on worker ``k`` with env seed
+    ``seed + k * envs_per_worker``, so the env slots get the seeds a local VecEnv of ``num_workers *
+    envs_per_worker`` envs would get, and with one worker the results are the local engine's, bit for bit.
+
+    Lingering: a worker whose share is done keeps its slots on the center policy until every share is done; the
+    completed episodes are reported as center episodes and the steps counted, so no worker idles at the end of a
+    generation, but these extra steps depend on timing. Pass ``linger=False`` for step counts that do not.
+
+    Callbacks are replayed once per remote vec step when the results are back; a dead worker is replaced and its
+    share re-run with the same seed (more than ``max_restarts`` replacements in one generation raise an error);
+    an exception raised in a worker is raised here. An error or ``KeyboardInterrupt`` during a generation stops
+    the workers (fresh ones start at the next evaluation).
+
+    :param max_restarts: Worker replacements allowed within one generation.
+    :param generation_timeout: Seconds a generation may take before the workers are stopped and ``TimeoutError``
+        is raised; ``None`` for no limit.
+    :param linger: Whether finished workers run the center policy while the others finish their shares.
+    """
+
+    #: How the workers are named in messages.
+    worker_name = "worker"
+    #: The constructor argument that sets ``max_restarts`` (named in messages).
+    restarts_argument = "max_restarts"
+
+    def __init__(self, max_restarts: int = 3, generation_timeout: float | None = None, linger: bool = True) -> None:
+        if int(max_restarts) != max_restarts or max_restarts < 0:
+            raise ValueError(f"{self.restarts_argument}={max_restarts}: it must be an integer >= 0.")
+        if generation_timeout is not None and not generation_timeout > 0:
+            raise ValueError(f"generation_timeout={generation_timeout}: give a positive number of seconds, or None.")
+        self.max_restarts = int(max_restarts)
+        self.generation_timeout = generation_timeout
+        self.linger = bool(linger)
+        #: Number of workers replaced after they died, over the evaluator's life.
+        self.restarted_workers = 0
+        #: Timings of the last generation: ``wall`` (s, whole ``evaluate``), ``eval_times`` (s, each worker's time
+        #: inside the engine), ``linger_times`` (s, the part of it spent on the center policy after the worker's
+        #: share was done), ``replay`` (s, callback replay), ``n_steps`` (env steps of each worker).
+        self.last_timings: dict[str, Any] = {}
+        self._pool: WorkerPool | None = None
+        self._release: weakref.finalize | None = None
+
+    # ------------------------------------------------------------------ lifecycle
+    @abstractmethod
+    def _acquire_pool(self) -> tuple[WorkerPool, Callable[[], None]]:
+        """:return: The pool to run on, and how to release it (a function that must not refer to this evaluator)."""
+
+    @property
+    def pool(self) -> WorkerPool:
+        """:return: The worker pool (acquired at the first use; released by :meth:`close` or garbage collection)."""
+        if self._pool is None:
+            pool, release = self._acquire_pool()
+            self._pool = pool
+            # Released when this evaluator is closed or garbage-collected, or at exit: nothing keeps it alive.
+            self._release = weakref.finalize(self, release)
+        return self._pool
+
+    def start(self) -> None:
+        """Start the workers (done by the first evaluation otherwise)."""
+        self.pool.start()
+
+    def close(self) -> None:
+        """Release the workers (a later evaluation starts them again)."""
+        if self._release is not None:
+            self._release()
+        self._pool = None
+        self._release = None
+
+    def __enter__(self) -> ShardedEvaluator:
+        self.start()
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+    def call_workers(self, fn: Callable[[VecEnv], Any]) -> list[Any]:
+        """
+        Run ``fn(vec_env)`` in every worker (e.g. to read wrapper attributes).
+
+        :param fn: A picklable function of the worker's VecEnv.
+        :return: Its results, in worker order.
+        """
+        self.start()
+        return self.pool.call(fn)
+
+    # ------------------------------------------------------------------ evaluation
+    def evaluate(
+        self,
+        network: NetworkSpec | HasNetworkSpec,
+        population: np.ndarray | NoiseTablePopulation,
+        center: np.ndarray,
+        n_episodes: int,
+        seed: int,
+        step_hook: StepHook | None = None,
+        shaping: RewardShaping | None = None,
+        max_episode_steps: int | None = None,
+    ) -> PopulationResult:
+        start_time = time.perf_counter()
+        network = as_network(network)
+        pool = self.pool
+        try:
+            pool.busy = True
+            pool.start()
+            outputs, shares = self._run_shares(
+                pool, network, population, center, n_episodes, seed, shaping, max_episode_steps
+            )
+        except BaseException:
+            # Unfinished shares would delay the next generation (and an interrupted run must not leave busy
+            # workers behind): start afresh next time.
+            pool.close()
+            raise
+        finally:
+            pool.busy = False
+        n_candidates = population.shape[0]
+        shape = shaping is not None and not shaping.is_identity
+        result = PopulationResult.empty(n_candidates, n_episodes, network.obs_dim, shaped=shape)
+        for share, output in zip(shares, outputs):
+            part: PopulationResult = output["result"]
+            candidates, episodes = share % n_candidates, share // n_candidates
+            result.returns[candidates, episodes] = part.returns[:, 0]
+            result.lengths[candidates, episodes] = part.lengths[:, 0]
+            if result.shaped_returns is not None:
+                result.shaped_returns[candidates, episodes] = part.fitness_returns[:, 0]
+            result.obs_stats.merge(part.obs_stats)
+            result.n_steps += part.n_steps
+            result.ep_infos.extend(part.ep_infos)
+            result.successes.extend(part.successes)
+            result.center_returns.extend(part.center_returns)
+            result.center_lengths.extend(part.center_lengths)
+        replay_start = time.perf_counter()
+        if step_hook is not None:
+            result.stopped = self._replay(outputs, step_hook)
+        end = time.perf_counter()
+        self.last_timings = {
+            "wall": end - start_time,
+            "replay": end - replay_start,
+            "eval_times": [output["eval_time"] for output in outputs],
+            "linger_times": [output["linger_time"] for output in outputs],
+            "n_steps": [output["result"].n_steps for output in outputs],
+        }
+        return result
+
+    def _run_shares(
+        self,
+        pool: WorkerPool,
+        network: NetworkSpec,
+        population: np.ndarray | NoiseTablePopulation,
+        center: np.ndarray,
+        n_episodes: int,
+        seed: int,
+        shaping: RewardShaping | None,
+        max_episode_steps: int | None,
+    ) -> tuple[list[dict[str, Any]], list[np.ndarray]]:
+        """Run the shares on the workers (replacing dead ones); return their outputs and job indices."""
+        assert pool.size is not None
+        n_candidates = population.shape[0]
+        n_jobs = n_candidates * n_episodes
+        # Job j is (candidate j % n_candidates, episode j // n_candidates): episode by episode, as locally.
+        shares = [s for s in np.array_split(np.arange(n_jobs), min(pool.size, n_jobs)) if len(s)]
+        payload: dict[str, Any] = {
+            "network": network,
+            "center": np.asarray(center, dtype=np.float64),
+            "population": None,
+            "noise": None,
+            "shaping": shaping,
+            "max_episode_steps": max_episode_steps,
+        }
+        table = None
+        if isinstance(population, NoiseTablePopulation):
+            table = population.table
+            payload["noise"] = (table.key, np.asarray(population.offsets), np.asarray(population.scales))
+        else:
+            payload["population"] = np.asarray(population, dtype=np.float32)
+        handle = pool.publish(payload)
+        deadline = None if self.generation_timeout is None else time.monotonic() + self.generation_timeout
+        token = next(_TOKENS)
+        restarts = 0
+
+        def replace(k: int, error: WorkerDied) -> None:
+            nonlocal restarts
+            restarts += 1
+            self._replace(pool, k, error, restarts)
+
+        def submit(k: int, lingering: bool) -> None:
+            while True:
+                try:
+                    seed_k = int(seed) + k * pool.envs_per_worker
+                    pool.submit(k, handle, shares[k] % n_candidates, seed_k, token if lingering else None, table)
+                    return
+                except WorkerDied as e:  # died before its share was sent
+                    replace(k, e)
+
+        try:
+            # With several shares, a worker whose share is done runs the center policy until all shares are done.
+            linger = self.linger and len(shares) > 1
+            for k in range(len(shares)):
+                submit(k, linger)
+            pending = set(range(len(shares))) if linger else set()
+            while pending:
+                k, error = pool.wait_share_done(sorted(pending), _remaining(deadline))
+                if error is None:
+                    pending.discard(k)
+                else:  # a dead worker's share is re-run (with lingering) by its replacement
+                    replace(k, error)
+                    submit(k, True)
+            if linger:
+                for k in range(len(shares)):
+                    pool.stop_lingering(k, token)
+            outputs: list[dict[str, Any]] = []
+            for k in range(len(shares)):
+                while True:
+                    try:
+                        outputs.append(pool.result(k, _remaining(deadline)))
+                        break
+                    except WorkerDied as e:  # died while lingering, or alone: re-run its share without lingering
+                        replace(k, e)
+                        submit(k, False)
+        except TimeoutError as e:
+            raise TimeoutError(
+                f"The {self.worker_name}s did not finish the generation within generation_timeout="
+                f"{self.generation_timeout} s: an episode may never end (an env without a time limit?) or a "
+                f"{self.worker_name} is stuck in the env. The {self.worker_name}s were stopped."
+            ) from e
+        return outputs, shares
+
+    def _replace(self, pool: WorkerPool, k: int, error: WorkerDied, restarts_this_generation: int) -> None:
+        if restarts_this_generation > self.max_restarts:
+            raise RuntimeError(
+                f"{self.worker_name.capitalize()}s died {restarts_this_generation} times in one generation "
+                f"({self.restarts_argument}={self.max_restarts}); last error: {error}"
+            ) from error
+        pool.replace(k)
+        self.restarted_workers += 1
+        logger.warning(
+            "%s %d died during a generation (%s); replaced it and re-running its share of the candidates "
+            "(%d restarts so far).",
+            self.worker_name.capitalize(),
+            k,
+            error,
+            self.restarted_workers,
+        )
+
+    @staticmethod
+    def _replay(outputs: Sequence[dict[str, Any]], step_hook: StepHook) -> bool:
+        """
+        Call the step hook once per remote vec step, the workers' steps interleaved (each with its ``n_envs``, its
+        real ``dones`` and ``rewards`` and, for slots whose episode ended, its infos without ``terminal_observation``;
+        ``new_obs`` and ``actions`` are ``None``: the workers do not send them back).
+
+        :return: Whether a hook call returned False before the last replayed step (the result is then discarded).
+        """
+        done_infos: list[dict[int, dict[int, dict[str, Any]]]] = []
+        for output in outputs:
+            by_step: dict[int, dict[int, dict[str, Any]]] = {}
+            for step, slot, info in output["done_infos"]:
+                by_step.setdefault(step, {})[slot] = info
+            done_infos.append(by_step)
+        n_calls = [len(output["dones"]) for output in outputs]
+        total = sum(n_calls)
+        calls = 0
+        for t in range(max(n_calls, default=0)):
+            for k, output in enumerate(outputs):
+                if t >= n_calls[k]:
+                    continue
+                dones = output["dones"][t]
+                infos: list[dict[str, Any]] = [{} for _ in range(len(dones))]
+                for slot, info in done_infos[k].get(t, {}).items():
+                    infos[slot] = dict(info)
+                calls += 1
+                if not step_hook(len(dones), infos, dones, output["rewards"][t], None, None):
+                    return calls < total
+        return False

@@ -1,0 +1,170 @@
+"""What one worker of a sharded evaluator runs (in a Ray actor or a worker process): its share of a generation.
+
+A worker owns a VecEnv built from an env config (the arguments of SB3's ``make_vec_env``) and runs its share of
+the generation's (candidate, episode) jobs with the local engine, :class:`~sb3_es.evaluation.VecEnvEvaluator`:
+there is no second engine. It records what the driver needs to replay the callbacks (the ``dones`` of every vec
+step, the infos of the slots whose episode ended) and can *linger*: once its share is done, it signals it and
+keeps every slot on the center policy until the driver tells it to stop. The host (Ray, processes) provides only
+the transport of these signals.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv
+
+from sb3_es.evaluation.network import NetworkSpec
+from sb3_es.evaluation.vec_env import VecEnvEvaluator
+from sb3_es.strategies.noise import noise_rows
+
+
+def make_env_fn(env: str | Callable[..., gym.Env]) -> Callable[..., gym.Env]:
+    """
+    :param env: Env id or factory.
+    :return: A factory taking the env kwargs; for an id, ``gym.make(id, **kwargs)`` as SB3 does for a string env.
+    """
+    if isinstance(env, str):
+        env_id = env
+
+        def make(**kwargs: Any) -> gym.Env:
+            return gym.make(env_id, **kwargs)
+
+        return make
+    return env
+
+
+def env_config(
+    env: str | Callable[..., gym.Env],
+    envs_per_worker: int,
+    wrapper_class: Callable[[gym.Env], gym.Env] | None = None,
+    env_kwargs: dict[str, Any] | None = None,
+    wrapper_kwargs: dict[str, Any] | None = None,
+    vec_env_cls: type[VecEnv] | None = None,
+    vec_env_kwargs: dict[str, Any] | None = None,
+    monitor_kwargs: dict[str, Any] | None = None,
+) -> dict[str, Any]:
+    """
+    Check the env arguments of a sharded evaluator and gather them for :class:`ShareRunner`.
+
+    :return: The keyword arguments of ``make_vec_env``, with the env id or factory under ``"env"``.
+    """
+    if not (isinstance(env, str) or callable(env)):
+        raise ValueError(
+            f"env={env!r}: pass an env id or a picklable env factory (a function returning a gym.Env), not an env "
+            "instance: every worker builds its own envs."
+        )
+    if int(envs_per_worker) != envs_per_worker or envs_per_worker < 1:
+        raise ValueError(f"envs_per_worker={envs_per_worker}: it must be a positive integer.")
+    return dict(
+        env=env,
+        n_envs=int(envs_per_worker),
+        wrapper_class=wrapper_class,
+        env_kwargs=env_kwargs,
+        wrapper_kwargs=wrapper_kwargs,
+        vec_env_cls=vec_env_cls or DummyVecEnv,
+        vec_env_kwargs=vec_env_kwargs,
+        monitor_kwargs=monitor_kwargs,
+    )
+
+
+class ShareRunner:
+    """
+    A worker's VecEnv and engine, and the noise tables it was given.
+
+    :param config: Output of :func:`env_config`.
+    """
+
+    def __init__(self, config: dict[str, Any]) -> None:
+        config = dict(config)
+        env = config.pop("env")
+        self.env: VecEnv = make_vec_env(make_env_fn(env), **config)
+        self.engine = VecEnvEvaluator(self.env)
+        self.noise_tables: dict[tuple[int, int], np.ndarray] = {}
+
+    def _check(self, network: NetworkSpec) -> None:
+        for name in ("observation_space", "action_space"):
+            ours, theirs = getattr(self.env, name), getattr(network, name)
+            if ours != theirs:
+                raise ValueError(
+                    f"The worker's env has {name} {ours}, but the policy was built for {theirs}: give the "
+                    "evaluator the same env (and wrappers) as the model."
+                )
+
+    def run(
+        self,
+        payload: dict[str, Any],
+        candidates: np.ndarray,
+        seed: int,
+        share_done: Callable[[], None] | None = None,
+        keep_lingering: Callable[[], bool] | None = None,
+    ) -> dict[str, Any]:
+        """
+        Evaluate one episode per entry of ``candidates`` (indices into the generation's population).
+
+        :param payload: The generation's data: ``network``, ``center``, ``population`` (rows) or ``noise``
+            (table key, offsets, scales), ``shaping``, ``max_episode_steps``.
+        :param candidates: The candidates of this share.
+        :param seed: Env seed of this share.
+        :param share_done: If given, the worker lingers: called once when the share is done (also on an error),
+            after which every slot runs the center policy while ``keep_lingering()`` returns True.
+        :param keep_lingering: See ``share_done``.
+        :return: The engine's result, the dones and rewards of every vec step, the done slots' infos (without
+            ``terminal_observation``) and the timings (in the engine, of which lingering).
+        """
+        network: NetworkSpec = payload["network"]
+        self._check(network)
+        center = payload["center"]
+        if payload["population"] is not None:
+            rows = payload["population"][candidates]
+        else:
+            key, offsets, scales = payload["noise"]
+            rows = noise_rows(self.noise_tables[tuple(key)], center, offsets[candidates], scales[candidates])
+        dones_log: list[np.ndarray] = []
+        rewards_log: list[np.ndarray] = []
+        done_infos: list[tuple[int, int, dict[str, Any]]] = []
+
+        def record(n_envs: int, infos: list[dict[str, Any]], dones: np.ndarray, rewards: np.ndarray, *_: Any) -> bool:
+            for slot in np.flatnonzero(dones).tolist():
+                info = {k: v for k, v in infos[slot].items() if k != "terminal_observation"}
+                done_infos.append((len(dones_log), slot, info))
+            dones_log.append(np.array(dones, dtype=bool))
+            rewards_log.append(np.array(rewards))
+            return True
+
+        linger_start: list[float] = []
+        linger: Callable[[], bool] | None = None
+        if share_done is not None:
+            lingering = keep_lingering or (lambda: False)
+
+            def linger() -> bool:
+                if not linger_start:
+                    linger_start.append(time.perf_counter())
+                    share_done()
+                return lingering()
+
+        start = time.perf_counter()
+        try:
+            result = self.engine.evaluate(
+                network, rows, center, 1, seed, record, payload["shaping"], payload["max_episode_steps"], linger
+            )
+        finally:
+            if share_done is not None and not linger_start:
+                share_done()  # also on an error, so that the driver's wait ends
+        end = time.perf_counter()
+        n_envs = self.env.num_envs
+        dones = np.stack(dones_log) if dones_log else np.zeros((0, n_envs), dtype=bool)
+        rewards = np.stack(rewards_log) if rewards_log else np.zeros((0, n_envs), dtype=np.float32)
+        return {
+            "result": result,
+            "dones": dones,
+            "rewards": rewards,
+            "done_infos": done_infos,
+            "eval_time": end - start,
+            "linger_time": end - linger_start[0] if linger_start else 0.0,
+        }

@@ -1,0 +1,161 @@
+"""What is the worker processes' own: evaluator="processes" from an env id, reproducibility for a seed and a worker
+count, the SubprocVecEnv hint, and no process left behind (Ctrl-C, normal exit, garbage collection).
+
+Their behaviour as a host of the sharded evaluator (same results as locally, callbacks, faults) is tested with Ray's
+in ``test_sharded.py``."""
+
+from __future__ import annotations
+
+import gc
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from envs import ToyEnv
+from stable_baselines3.common.vec_env import SubprocVecEnv, VecNormalize
+
+from sb3_es import ARS
+from sb3_es.evaluation.processes import ProcessEvaluator, usable_cpus
+
+REPO = Path(__file__).resolve().parent.parent
+
+
+def gone(pid: int) -> bool:
+    """:return: Whether process ``pid`` has ended (a zombie waiting for its parent to read its status counts)."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] == "Z"
+    except FileNotFoundError:
+        return True
+
+
+def wait_gone(pids: list[int], timeout: float = 30.0) -> bool:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if all(gone(pid) for pid in pids):
+            return True
+        time.sleep(0.1)
+    return False
+
+
+def test_evaluator_processes_from_env_id() -> None:
+    with pytest.raises(ValueError, match="env id"):
+        ARS("LinearPolicy", ToyEnv(), evaluator="processes")
+    model = ARS("LinearPolicy", "Pendulum-v1", n_delta=2, seed=0, evaluator="processes")
+    model.learn(1)
+    evaluator = model._evaluator
+    assert isinstance(evaluator, ProcessEvaluator)
+    assert evaluator.env == "Pendulum-v1" and evaluator.num_workers == usable_cpus()
+    assert model._n_updates == 1 and model.num_timesteps >= 4 * 200
+    pids = [process.pid for process in evaluator._workers]
+    del model, evaluator
+    gc.collect()  # an evaluator no longer used stops its workers
+    assert wait_gone(pids)
+
+
+def test_one_worker_is_the_local_engine() -> None:
+    local = ARS("LinearPolicy", "Pendulum-v1", n_delta=2, seed=3)
+    with ProcessEvaluator("Pendulum-v1", num_workers=1) as evaluator:
+        remote = ARS("LinearPolicy", "Pendulum-v1", n_delta=2, seed=3, evaluator=evaluator)
+        for model in (local, remote):
+            model.learn(1)
+            model.learn(1, reset_num_timesteps=False)
+    assert remote.num_timesteps == local.num_timesteps == 2 * 4 * 200
+    np.testing.assert_array_equal(remote.strategy.center, local.strategy.center)
+
+
+def test_reproducible_for_a_seed_and_worker_count() -> None:
+    # Pendulum's episodes depend on the reset seeds: the shares' seeds, not the timing, decide the results.
+    centers = []
+    for _ in range(2):
+        with ProcessEvaluator("Pendulum-v1", num_workers=2) as evaluator:
+            model = ARS("LinearPolicy", "Pendulum-v1", n_delta=3, seed=5, evaluator=evaluator)
+            model.learn(1)
+            model.learn(1, reset_num_timesteps=False)
+            centers.append(model.strategy.center)
+    np.testing.assert_array_equal(centers[0], centers[1])
+
+
+def test_models_in_a_loop() -> None:
+    pids: list[int] = []
+    for seed in range(3):
+        model = ARS("LinearPolicy", "Pendulum-v1", n_delta=1, seed=seed, evaluator="processes")
+        model.learn(1)
+        assert model._n_updates == 1
+        pids += [process.pid for process in model._evaluator._workers]  # type: ignore[union-attr]
+        model._evaluator.close()  # type: ignore[union-attr]
+    assert wait_gone(pids)
+
+
+def test_subproc_vec_env_user_is_told_the_faster_option() -> None:
+    env = VecNormalize(SubprocVecEnv([lambda: ToyEnv()] * 2, start_method="fork"))
+    model = ARS("LinearPolicy", env, n_delta=1)
+    try:
+        with pytest.warns(UserWarning, match=r"SubprocVecEnv.*evaluator='processes'"):
+            model.learn(1)
+    finally:
+        env.close()
+
+
+def test_bad_arguments() -> None:
+    with pytest.raises(ValueError, match="env instance"):
+        ProcessEvaluator(ToyEnv())  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="num_workers=0"):
+        ProcessEvaluator("Pendulum-v1", num_workers=0)
+    with pytest.raises(ValueError, match="start_method='thread'"):
+        ProcessEvaluator("Pendulum-v1", start_method="thread")
+    evaluator = ProcessEvaluator("NoSuchEnv-v0", num_workers=1)
+    with pytest.raises(Exception, match="NoSuchEnv"):
+        evaluator.start()
+    assert evaluator._workers == []
+
+
+SCRIPT = """
+import sys
+from sb3_es import ARS
+from sb3_es.evaluation.processes import ProcessEvaluator
+
+evaluator = ProcessEvaluator("Pendulum-v1", num_workers=2)
+model = ARS("LinearPolicy", "Pendulum-v1", n_delta=4, evaluator=evaluator)
+evaluator.start()
+print(" ".join(str(p.pid) for p in evaluator._workers), flush=True)
+model.learn(int(sys.argv[1]))
+print("done", flush=True)
+"""
+
+
+def run_script(steps: int) -> subprocess.Popen:
+    return subprocess.Popen(
+        [sys.executable, "-c", SCRIPT, str(steps)],
+        cwd=REPO,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,  # its own process group, as a terminal's foreground job
+    )
+
+
+def test_normal_exit_leaves_no_process() -> None:
+    script = run_script(1)  # never closes the evaluator
+    out, err = script.communicate(timeout=600)
+    assert script.returncode == 0, err
+    pids = [int(pid) for pid in out.splitlines()[0].split()]
+    assert out.splitlines()[-1] == "done"
+    assert wait_gone(pids)
+
+
+def test_ctrl_c_leaves_no_process() -> None:
+    script = run_script(10**9)
+    assert script.stdout is not None
+    pids = [int(pid) for pid in script.stdout.readline().split()]
+    assert len(pids) == 2
+    time.sleep(2.0)  # inside a generation
+    os.killpg(script.pid, signal.SIGINT)  # Ctrl-C: the whole foreground group gets SIGINT
+    _, err = script.communicate(timeout=600)
+    assert script.returncode != 0 and "KeyboardInterrupt" in err
+    assert wait_gone(pids)

@@ -1,0 +1,225 @@
+"""The sharded evaluator on each host (worker processes, Ray actors): same results as the local engine, callbacks
+replayed, dead workers replaced, errors and interrupts handled."""
+
+from __future__ import annotations
+
+import logging
+import os
+import signal
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from envs import CrashingToyEnv, StepCounter, ToyEnv
+from sharded_helpers import (
+    ENVS_PER_WORKER,
+    ReplayCounter,
+    assert_same_candidates,
+    learn_generations,
+    make_ars,
+    remote_steps,
+    toy_policy,
+    toy_population,
+)
+from stable_baselines3.common.env_util import make_vec_env
+
+from sb3_es.evaluation import VecEnvEvaluator
+from sb3_es.evaluation.processes import ProcessEvaluator, RemoteTraceback
+from sb3_es.evaluation.sharded import ShardedEvaluator
+from sb3_es.strategies.noise import NoiseTablePopulation, SharedNoiseTable
+
+HOSTS = ["processes", pytest.param("ray", marks=pytest.mark.ray)]
+
+
+@pytest.fixture(scope="module", params=HOSTS)
+def host(request: pytest.FixtureRequest) -> str:
+    if request.param == "ray":
+        request.getfixturevalue("ray_cluster")
+    return request.param
+
+
+def make_evaluator(host: str, env: Any, **kwargs: Any) -> ShardedEvaluator:
+    if host == "ray":
+        from sb3_es.evaluation.ray import RayEvaluator
+
+        # Half a CPU each: two such evaluators fit in the 2-CPU test cluster.
+        return RayEvaluator(env, num_cpus_per_worker=0.5, **kwargs)
+    return ProcessEvaluator(env, **kwargs)
+
+
+def kill_worker(evaluator: ShardedEvaluator, k: int) -> None:
+    """Kill worker ``k`` from outside, as the OOM killer or a lost node would."""
+    if isinstance(evaluator, ProcessEvaluator):
+        os.kill(evaluator._workers[k].pid, signal.SIGKILL)
+        evaluator._workers[k].join()
+    else:
+        import ray
+
+        ray.kill(evaluator._actors[k])  # type: ignore[attr-defined]
+
+
+def workers(evaluator: ShardedEvaluator) -> list[Any]:
+    return evaluator._workers if isinstance(evaluator, ProcessEvaluator) else evaluator._actors  # type: ignore[attr-defined]
+
+
+@pytest.fixture(scope="module")
+def toy(host: str) -> Iterator[ShardedEvaluator]:
+    """Two workers with two ToyEnv slots each, counting steps."""
+    evaluator = make_evaluator(
+        host,
+        ToyEnv,
+        num_workers=2,
+        envs_per_worker=ENVS_PER_WORKER,
+        wrapper_class=StepCounter,
+        wrapper_kwargs=dict(counter=[0]),
+    )
+    with evaluator:
+        yield evaluator
+
+
+def test_same_results_as_local_engine(toy: ShardedEvaluator) -> None:
+    policy = toy_policy()
+    population = toy_population(policy, 7)
+    center = population.mean(axis=0)
+    remote_steps(toy)
+    calls: list[int] = []
+
+    def hook(n_envs: int, infos: list[dict[str, Any]], dones: np.ndarray, *_: Any) -> bool:
+        calls.append(n_envs)
+        return True
+
+    result = toy.evaluate(policy.network_spec(), population, center, 2, seed=5, step_hook=hook)
+    local = VecEnvEvaluator(make_vec_env(ToyEnv, n_envs=4)).evaluate(policy, population, center, 2, seed=5)
+    assert_same_candidates(result, local)
+    # Every env step taken remotely is counted once, and the hook ran once per remote vec step.
+    assert result.n_steps == remote_steps(toy) == sum(calls) == sum(toy.last_timings["n_steps"])
+    assert len(calls) == result.n_steps // ENVS_PER_WORKER
+    assert len(toy.last_timings["eval_times"]) == 2
+    # With two shares, each worker, once its share is done, runs the center policy until the driver has seen
+    # both shares done (those steps are in n_steps and in the replay above).
+    assert all(t > 0 for t in toy.last_timings["linger_times"])
+
+    # A single share runs on worker 0 with the generation's seed: bit for bit the local engine on 2 envs,
+    # center-policy episodes and step count included.
+    one = toy.evaluate(policy, population[:1], center, 1, seed=5)
+    local_one = VecEnvEvaluator(make_vec_env(ToyEnv, n_envs=ENVS_PER_WORKER)).evaluate(
+        policy, population[:1], center, 1, seed=5
+    )
+    assert_same_candidates(one, local_one)
+    np.testing.assert_array_equal(one.obs_stats.mean, local_one.obs_stats.mean)
+    assert one.n_steps == local_one.n_steps
+    assert one.center_returns == local_one.center_returns
+    assert toy.last_timings["linger_times"] == [0.0]
+
+
+def test_noise_table_population(toy: ShardedEvaluator) -> None:
+    policy = toy_policy()
+    table = SharedNoiseTable(size=10_000, seed=3)
+    rng = np.random.default_rng(1)
+    offsets = np.repeat(table.sample_offsets(rng, policy.num_params, 3), 2)
+    scales = np.tile([0.3, -0.3], 3)
+    center = rng.normal(size=policy.num_params) * 0.1
+    population = NoiseTablePopulation(table, center, offsets, scales)
+    dense = np.asarray(population)
+    assert population.shape == dense.shape == (6, policy.num_params)
+    noise = table.get(offsets[1], policy.num_params).astype(np.float64)
+    np.testing.assert_array_equal(dense[1], center - 0.3 * noise)
+    from_table = toy.evaluate(policy, population, center, 1, seed=2)
+    from_rows = toy.evaluate(policy, dense, center, 1, seed=2)
+    np.testing.assert_array_equal(from_table.returns, from_rows.returns)
+    np.testing.assert_array_equal(from_table.obs_stats.mean, from_rows.obs_stats.mean)
+
+
+def test_ars_same_parameters_as_local(toy: ShardedEvaluator) -> None:
+    local = make_ars(make_vec_env(ToyEnv, n_envs=2))
+    remote = make_ars(make_vec_env(ToyEnv, n_envs=2), evaluator=toy)
+    learn_generations(local, 2)
+    learn_generations(remote, 2)
+    assert local._n_updates == remote._n_updates == 2
+    assert not np.array_equal(local.strategy.center, np.zeros_like(local.strategy.center))
+    np.testing.assert_array_equal(remote.strategy.center, local.strategy.center)
+    # Same observations; the float64 statistics differ only by the order of the merges.
+    np.testing.assert_allclose(remote.policy.obs_mean.numpy(), local.policy.obs_mean.numpy(), rtol=1e-12)
+    np.testing.assert_allclose(remote.policy.obs_var.numpy(), local.policy.obs_var.numpy(), rtol=1e-12)
+    assert remote.policy.obs_count.item() == local.policy.obs_count.item()
+
+
+def test_timesteps_and_callbacks(toy: ShardedEvaluator) -> None:
+    model = make_ars(ToyEnv(), evaluator=toy)
+    callback = ReplayCounter()
+    remote_steps(toy)
+    learn_generations(model, 2, callback)
+    steps = remote_steps(toy)
+    assert model.num_timesteps == callback.steps == steps
+    # on_step once per remote vec step; each episode's end appears in the replayed dones.
+    assert callback.n_calls == steps // ENVS_PER_WORKER
+    assert callback.dones >= 2 * 2 * model.n_delta
+
+
+def test_callback_stops_training(toy: ShardedEvaluator) -> None:
+    model = make_ars(ToyEnv(), evaluator=toy)
+    start = model.policy.parameters_to_vector()
+    callback = ReplayCounter(stop_at=3)
+    model.learn(10_000, callback=callback)
+    # The stop request takes effect once the generation is back: the replay stops there and the
+    # generation is discarded, as with the local engine.
+    assert callback.n_calls == 3
+    assert model.num_timesteps == 3 * ENVS_PER_WORKER
+    assert model._n_updates == 0
+    np.testing.assert_array_equal(model.policy.parameters_to_vector(), start)
+
+
+def test_faults(host: str, tmp_path: Path, caplog: pytest.LogCaptureFixture, monkeypatch: pytest.MonkeyPatch) -> None:
+    crash_flag, error_flag = str(tmp_path / "crashed"), str(tmp_path / "error")
+    policy = toy_policy()
+    population = toy_population(policy, 8, seed=3)
+    center = np.zeros(policy.num_params)
+    local = VecEnvEvaluator(make_vec_env(ToyEnv, n_envs=2)).evaluate(policy, population, center, 1, seed=0)
+
+    def crashing_env() -> CrashingToyEnv:
+        return CrashingToyEnv(crash_flag, error_flag)
+
+    with make_evaluator(host, crashing_env, num_workers=2) as evaluator:
+        # One worker's process dies mid-generation: it is replaced and its share re-run.
+        with caplog.at_level(logging.WARNING):
+            result = evaluator.evaluate(policy, population, center, 1, seed=0)
+        assert os.path.exists(crash_flag)
+        assert evaluator.restarted_workers == 1
+        assert any("died" in record.getMessage() for record in caplog.records)
+        assert_same_candidates(result, local)
+
+        # A worker killed between generations is replaced too.
+        kill_worker(evaluator, 1)
+        result = evaluator.evaluate(policy, population, center, 1, seed=0)
+        assert evaluator.restarted_workers == 2
+        assert_same_candidates(result, local)
+
+        # An exception raised by the env is not retried: it reaches the driver, and the workers are stopped.
+        Path(error_flag).touch()
+        with pytest.raises(ValueError, match="env error raised inside a worker") as error:
+            evaluator.evaluate(policy, population, center, 1, seed=0)
+        if host == "processes":  # with the worker's traceback (Ray puts it in the message)
+            assert isinstance(error.value.__cause__, RemoteTraceback)
+            assert "in step" in str(error.value.__cause__) and "CrashingToyEnv" not in str(error.value)
+        assert workers(evaluator) == []
+        assert evaluator.restarted_workers == 2
+
+        # A KeyboardInterrupt while waiting for the workers stops them (fresh ones are started next time).
+        os.remove(error_flag)
+        evaluator.start()
+        running = workers(evaluator)
+
+        def interrupted(*args: Any, **kwargs: Any) -> Any:
+            raise KeyboardInterrupt
+
+        monkeypatch.setattr(evaluator.pool, "wait_share_done", interrupted)
+        with pytest.raises(KeyboardInterrupt):
+            evaluator.evaluate(policy, population, center, 1, seed=0)
+        assert workers(evaluator) == []
+        if host == "processes":
+            assert not any(process.is_alive() for process in running)
+        monkeypatch.undo()
+        assert_same_candidates(evaluator.evaluate(policy, population, center, 1, seed=0), local)
+    assert workers(evaluator) == []
