@@ -74,6 +74,17 @@ class OpenES(PopulationAlgorithm):
 
     strategy: OpenESStrategy
     scheduled_hyperparameters = ("learning_rate", "sigma")
+    strategy_hyperparameters = (
+        "population_size",
+        "antithetic",
+        "fitness_shaping",
+        "weight_decay",
+        "forget_best",
+        "sigma_decay",
+        "sigma_limit",
+        "learning_rate_decay",
+        "learning_rate_limit",
+    )
     max_speed: float | None = None  # class default for files saved before ClipUp existed
 
     def __init__(
