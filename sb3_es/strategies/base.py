@@ -91,7 +91,7 @@ class Strategy(ABC):
         :return: Scalars worth logging.
         """
 
-    def check_settings(self) -> None:
+    def check_settings(self) -> None:  # noqa: B027  (optional hook: most strategies have settings to check)
         """
         Raise a clear ``ValueError`` for settings (attributes such as ``population_size``) that the strategy cannot
         use; called when it is built and when a loaded model is given new hyperparameters. None to check here.

@@ -69,9 +69,7 @@ class PGPEStrategy(GradientStrategy):
         if int(population_size) != population_size or population_size < 2 or population_size % 2:
             raise ValueError(f"population_size={population_size}: it must be even (symmetric pairs) and at least 2.")
         if not self.stdev_learning_rate >= 0:
-            raise ValueError(
-                f"stdev_learning_rate={self.stdev_learning_rate}: it must be >= 0 (0 keeps stdev fixed)."
-            )
+            raise ValueError(f"stdev_learning_rate={self.stdev_learning_rate}: it must be >= 0 (0 keeps stdev fixed).")
         if not 0 < self.stdev_max_change < 1:
             raise ValueError(
                 f"stdev_max_change={self.stdev_max_change}: it must be in (0, 1) (a relative change; 0.2 in the "

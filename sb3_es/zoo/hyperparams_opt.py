@@ -74,6 +74,59 @@ def sample_cmaes_params(trial: optuna.Trial, n_actions: int, n_envs: int, additi
     )
 
 
+def sample_pgpe_params(trial: optuna.Trial, n_actions: int, n_envs: int, additional_args: dict) -> dict[str, Any]:
+    """
+    PGPE with ClipUp: initial standard deviation ``stdev_init``, ClipUp's ``max_speed`` (the center learning rate
+    is half of it) and ``population_size`` (8 to 128, a power of 2: even, for symmetric sampling).
+
+    :param trial: The Optuna trial.
+    :param n_actions: Action dimension (unused).
+    :param n_envs: Env slots (unused).
+    :param additional_args: rl-zoo's extra arguments (unused).
+    :return: Keyword arguments for :class:`~sb3_es.PGPE`.
+    """
+    return convert_population_params(
+        {
+            "stdev_init": trial.suggest_float("stdev_init", 0.01, 0.5, log=True),
+            "max_speed": trial.suggest_float("max_speed", 0.01, 0.5, log=True),
+            "population_size_pow": trial.suggest_int("population_size_pow", 3, 7),
+        }
+    )
+
+
+def convert_simple_es_params(sampled: dict[str, Any]) -> dict[str, Any]:
+    """
+    Keyword arguments from the values stored for a SimpleES trial (``n_elite`` as a fraction of the population).
+
+    :param sampled: The trial's values.
+    :return: Keyword arguments for :class:`~sb3_es.SimpleES`.
+    """
+    params = convert_population_params(sampled)
+    if "elite_fraction" in params:
+        params["n_elite"] = max(1, int(params.pop("elite_fraction") * params["population_size"]))
+    return params
+
+
+def sample_simple_es_params(trial: optuna.Trial, n_actions: int, n_envs: int, additional_args: dict) -> dict[str, Any]:
+    """
+    SimpleES: ``sigma``, ``population_size`` (8 to 128, a power of 2) and ``n_elite`` as a fraction of it (1 child
+    at least: WinnerES).
+
+    :param trial: The Optuna trial.
+    :param n_actions: Action dimension (unused).
+    :param n_envs: Env slots (unused).
+    :param additional_args: rl-zoo's extra arguments (unused).
+    :return: Keyword arguments for :class:`~sb3_es.SimpleES`.
+    """
+    return convert_simple_es_params(
+        {
+            "sigma": trial.suggest_float("sigma", 0.01, 1.0, log=True),
+            "population_size_pow": trial.suggest_int("population_size_pow", 3, 7),
+            "elite_fraction": trial.suggest_float("elite_fraction", 0.0, 0.5),
+        }
+    )
+
+
 def convert_reinforce_params(sampled: dict[str, Any]) -> dict[str, Any]:
     """
     Keyword arguments from the values stored for a REINFORCE trial (``n_bins`` goes into ``policy_kwargs``).
@@ -110,6 +163,8 @@ SAMPLERS: dict[str, Sampler] = {
     "ars_es": sample_ars_params,
     "openes": sample_openes_params,
     "cmaes": sample_cmaes_params,
+    "pgpe": sample_pgpe_params,
+    "simple_es": sample_simple_es_params,
     "reinforce": sample_reinforce_params,
 }
 
@@ -118,5 +173,7 @@ CONVERTERS: dict[str, Callable[[dict[str, Any]], dict[str, Any]]] = {
     "ars_es": convert_ars_params,
     "openes": convert_population_params,
     "cmaes": convert_population_params,
+    "pgpe": convert_population_params,
+    "simple_es": convert_simple_es_params,
     "reinforce": convert_reinforce_params,
 }

@@ -6,9 +6,9 @@ and a hyperparameter file passed with ``--conf-file``; hyperparameter search loo
 ``rl_zoo3.hyperparams_opt.HYPERPARAMS_SAMPLER``. :func:`register` adds the sb3-es entries to those dicts and
 changes nothing else in rl-zoo.
 
-**Adding an algorithm** (e.g. PGPE): add ``"pgpe": PGPE`` to :data:`ALGOS`, a sampler to
+**Adding an algorithm**: add ``"<key>": <Class>`` to :data:`ALGOS`, a sampler to
 :data:`sb3_es.zoo.hyperparams_opt.SAMPLERS` (and, if it samples derived values, a converter to ``CONVERTERS``),
-and a file ``sb3_es/hyperparams/pgpe.yml`` with a ``default`` entry. ``tests/test_zoo.py`` checks all three for
+and a file ``sb3_es/hyperparams/<key>.yml`` with a ``default`` entry. ``tests/test_zoo.py`` checks all three for
 every key.
 """
 
@@ -26,7 +26,7 @@ except ImportError as e:  # pragma: no cover - exercised only without the extra
 import yaml
 from stable_baselines3.common.base_class import BaseAlgorithm
 
-from sb3_es import ARS, CMAES, REINFORCE, OpenES
+from sb3_es import ARS, CMAES, PGPE, REINFORCE, OpenES, SimpleES
 from sb3_es.zoo.hyperparams_opt import CONVERTERS, SAMPLERS
 
 #: The sb3-es algorithms by rl-zoo key (``--algo``). The key also names the log folder (``logs/<key>/``) and the
@@ -35,6 +35,8 @@ ALGOS: dict[str, type[BaseAlgorithm]] = {
     "ars_es": ARS,
     "openes": OpenES,
     "cmaes": CMAES,
+    "pgpe": PGPE,
+    "simple_es": SimpleES,
     "reinforce": REINFORCE,
 }
 
