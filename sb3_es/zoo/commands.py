@@ -10,6 +10,7 @@ import shlex
 import shutil
 import sys
 import tempfile
+import warnings
 from collections.abc import Iterator, Sequence
 from pathlib import Path
 
@@ -195,7 +196,9 @@ def run(command: str, args: Sequence[str]) -> None:
         if function:
             getattr(importlib.import_module(module), function)()
         else:
-            runpy.run_module(module, run_name="__main__", alter_sys=False)
+            with warnings.catch_warnings():  # rl-zoo imports some of these modules itself; running them is intended
+                warnings.filterwarnings("ignore", "'rl_zoo3.* found in sys.modules", RuntimeWarning)
+                runpy.run_module(module, run_name="__main__", alter_sys=False)
 
 
 def main(argv: Sequence[str] | None = None) -> None:
