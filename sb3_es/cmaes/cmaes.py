@@ -60,14 +60,6 @@ class CMAES(PopulationAlgorithm):
     DIAGONAL_THRESHOLD: ClassVar[int] = 1000
     strategy_hyperparameters = ("max_restarts",)
     strategy: CMAESStrategy
-    _fixed_on_load: ClassVar[dict[str, str]] = {
-        **PopulationAlgorithm._fixed_on_load,
-        "sigma": "it is the initial step size, which pycma has adapted since",
-        "population_size": "pycma's state is built for it",
-        "diagonal": "pycma's state is built for it",
-        "restarts": "the restart schedule is part of the search state",
-        "cma_options": "pycma's state is built with them",
-    }
 
     def __init__(
         self,
@@ -123,9 +115,6 @@ class CMAES(PopulationAlgorithm):
         self.cma_options = cma_options
         if _init_setup_model:
             self._setup_model()
-
-    def _configure_strategy(self) -> None:
-        self.strategy.max_restarts = self.max_restarts
 
     def _make_strategy(self, center: np.ndarray, seed: np.random.SeedSequence) -> CMAESStrategy:
         diagonal = len(center) > self.DIAGONAL_THRESHOLD if self.diagonal == "auto" else bool(self.diagonal)

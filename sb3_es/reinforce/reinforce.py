@@ -132,7 +132,6 @@ class REINFORCE(ESBaseAlgorithm):
         "ent_coef",
         "max_grad_norm",
     )
-    _fixed_on_load: ClassVar[dict[str, str]] = {"use_baseline": "the policy's value network exists or not"}
 
     def __init__(
         self,
