@@ -165,7 +165,9 @@ def test_rl_zoos_constant_schedules_are_numbers(tmp_path: Path) -> None:
     model = ARS.load(saved(ARS, tmp_path), delta_std=ConstantSchedule(0.05), learning_rate=ConstantSchedule(0.01))
     assert model.delta_std == 0.05 and model.learning_rate == 0.01
     # a number, so that OpenES's learning_rate_decay applies to it
-    openes = OpenES("MlpPolicy", "Pendulum-v1", population_size=4, learning_rate=ConstantSchedule(0.1))
-    openes.learning_rate_decay, openes.learning_rate_limit = 0.5, 0.0
+    openes = OpenES(
+        "MlpPolicy", "Pendulum-v1", population_size=4, learning_rate=ConstantSchedule(0.1), learning_rate_decay=0.5
+    )
     openes.learn(1600)
-    assert openes.learning_rate == 0.1 and openes.strategy.learning_rate == 0.1 * 0.5
+    assert openes.learning_rate == 0.1 and openes._n_updates == 2
+    assert openes.strategy.learning_rate == pytest.approx(0.1 * 0.5**2)
