@@ -1,49 +1,54 @@
 """
-Compare algorithms on environments over seeds with equal budgets: one TensorBoard root, CSVs, plots, a table.
+Compare algorithms on environments over seeds with equal budgets, in rl-zoo's log layout: one TensorBoard root,
+rl-zoo run folders with ``evaluations.npz`` (so that rl-zoo's ``all_plots`` and ``plot_from_file`` read them), and
+what rl-zoo lacks: the return against training wall-clock and a race table (steps taken, time to a threshold).
 
 Examples::
 
     # ES methods against PPO and SAC on Pendulum-v1, 3 seeds, 200k env steps each
-    python benchmarks/compare.py --algos ars openes cmaes reinforce ppo sac --envs Pendulum-v1 \\
+    python benchmarks/compare.py --algos ars_es openes cmaes reinforce ppo sac --envs Pendulum-v1 \\
         --seeds 0 1 2 --steps 200000 --eval-freq 10000 --out results/pendulum
 
     # equal wall-clock budgets (training time, evaluations excluded) instead of env steps
-    python benchmarks/compare.py --algos ars ppo --envs Swimmer-v5 --seconds 600 --out results/swimmer
+    python benchmarks/compare.py --algos ars_es ppo --envs Swimmer-v5 --seconds 600 --out results/swimmer
 
-    # redraw the plots and the table from the runs already in an output folder
+    # redraw the wall-clock plot and the table from the runs already in an output folder
     python benchmarks/compare.py --out results/pendulum --report-only
 
-Runs are sequential, one process, with a progress line. Hyperparameters: ``benchmarks/hyperparams/<algo>.yml``
-for the sb3-es algorithms (``ars``, ``openes``, ``cmaes``, ``reinforce``), rl-zoo3's own
-``hyperparams/<algo>.yml`` for the others (``ppo``, ``sac``, ...). When rl-zoo3 has no entry for an env id
-but has one for an older version (``Hopper-v4`` for ``Hopper-v5``) that entry is used, otherwise rl-zoo3's
-``default``; for Dict observations (dm_control) a ``FlattenObservation`` wrapper is added. The
-hyperparameters used are written to ``configs/``. Models, envs and ``VecNormalize`` come from
-rl-zoo3's ``ExperimentManager`` (with the sb3-es changes of :mod:`sb3_es.zoo`).
+    # learning curves against env steps, the results table, rliable's IQM with bootstrap intervals
+    python -m sb3_es.zoo all_plots -a ars_es ppo -e Pendulum-v1 -f results/pendulum/logs -o results/pendulum/all_plots
+    python -m sb3_es.zoo plot_from_file -i results/pendulum/all_plots.pkl --rliable --iqm
 
-Every ``--eval-freq`` env steps, and at the start and the end of training, SB3's ``EvalCallback``
-evaluates the current policy (deterministic, ``--eval-episodes`` episodes on a separate env) and writes
-``eval/mean_reward`` to TensorBoard; the same numbers go to the run's CSV with the env steps and the
-training wall-clock time (evaluation time excluded). A budget in steps is passed to ``learn()``, which
-may end past it (a population method finishes its generation, PPO its rollout); the steps actually
-taken are reported. A wall-clock budget stops training through a callback.
+Runs are sequential, one process, with a progress line. Algorithm keys are rl-zoo's (``ppo``, ``sac``, ``ars`` for
+sb3-contrib's ARS, ...) and sb3-es's (``ars_es``, ``openes``, ``cmaes``, ``reinforce``). Hyperparameters: the
+packaged ``sb3_es/hyperparams/<algo>.yml`` for the sb3-es algorithms, rl-zoo3's own ``hyperparams/<algo>.yml`` for
+the others. When rl-zoo3 has no entry for an env id but has one for an older version (``Hopper-v4`` for
+``Hopper-v5``) that entry is used, otherwise rl-zoo3's ``default``; for Dict observations (dm_control) a
+``FlattenObservation`` wrapper is added. The hyperparameters used are written to ``configs/``. Models, envs and
+``VecNormalize`` come from rl-zoo3's ``ExperimentManager``.
+
+Every ``--eval-freq`` env steps, and at the start and the end of training, SB3's ``EvalCallback`` evaluates the
+current policy (deterministic, ``--eval-episodes`` episodes on a separate env), writes ``eval/mean_reward`` to
+TensorBoard and appends to the run's ``evaluations.npz``; the training wall-clock of each evaluation (evaluation
+time excluded) goes to ``summary.json``. Two evaluations at least per run, so that ``all_plots`` keeps a run that
+stopped early (it drops single-evaluation runs). A budget in steps is passed to ``learn()``, which ends within
+one generation (an sb3-es algorithm) or one rollout (PPO) past it; the steps taken are reported. A wall-clock
+budget stops training through a callback.
 
 Output folder layout::
 
-    tb/<env>/<ALGO>_<n>/                 TensorBoard runs, side by side (tensorboard --logdir <out>/tb)
-    runs/<env>/<algo>/seed<s>/eval.csv   env_steps, wall_s, wall_total_s, mean_return, std_return, mean_ep_length
-    runs/<env>/<algo>/seed<s>/summary.json
-    logs/<algo>/<env>_<n>/               rl-zoo log folders: saved model, config.yml, monitor files
-    configs/<algo>-<env>.yml             hyperparameters used for rl-zoo3's algorithms
-    plots/<env>.png                      mean return against env steps and against wall-clock, band over seeds
-    results.md                           table: steps, time, final and best return, time to threshold
+    logs/<algo>/<env>_1_seed<s>/          rl-zoo run folder: model, <env>/config.yml, monitor files,
+                                          evaluations.npz, best_model.zip, summary.json (wall-clock, steps taken)
+    tb/<env>/<RUN>_<n>/                   TensorBoard runs side by side (tensorboard --logdir <out>/tb)
+    configs/<algo>-<env>.yml              hyperparameters used for rl-zoo3's algorithms
+    plots/<env>-wallclock.png             mean return against training wall-clock, band over seeds
+    results.md                            race table: steps taken, time, final return, time to threshold
 """
 
 from __future__ import annotations
 
 import argparse
 import contextlib
-import csv
 import io
 import json
 import math
@@ -51,6 +56,7 @@ import os
 import platform
 import re
 import shlex
+import shutil
 import sys
 import time
 import traceback
@@ -69,14 +75,13 @@ from stable_baselines3.common.vec_env import VecEnv
 
 try:
     import rl_zoo3
+    from rl_zoo3.exp_manager import ExperimentManager
 
-    from sb3_es.zoo import ExperimentManager, default_conf_file, register, sb3_es_algos
+    from sb3_es.zoo import UsageError, check_algo, default_conf_file, register, sb3_es_algos
 except ImportError as e:  # pragma: no cover
     raise SystemExit(f"benchmarks/compare.py needs rl_zoo3: pip install 'sb3-es[zoo]' ({e})") from e
 
-#: Display names (TensorBoard run names are the class names).
-DEFAULT_ALGOS = ("ars", "openes", "cmaes", "reinforce", "ppo", "sac")
-CSV_FIELDS = ("env_steps", "wall_s", "wall_total_s", "mean_return", "std_return", "mean_ep_length")
+DEFAULT_ALGOS = ("ars_es", "openes", "cmaes", "reinforce", "ppo", "sac")
 
 
 def env_slug(env_id: str) -> str:
@@ -142,7 +147,7 @@ def config_for(algo: str, env_id: str, out: Path) -> tuple[Path, str]:
         path = default_conf_file(algo)
         data = yaml.safe_load(path.read_text())
         key = env_id if env_id in data else "default"
-        return path, f"sb3-es {path.parent.name}/{path.name}, entry {key}"
+        return path, f"sb3-es sb3_es/{path.parent.name}/{path.name}, entry {key}"
     entry, note = resolve_zoo_entry(algo, env_id)
     path = out / "configs" / f"{algo}-{env_slug(env_id)}.yml"
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -207,15 +212,15 @@ class Progress:
 # ---------------------------------------------------------------------------------------------- recording
 class RecordingEvalCallback(EvalCallback):
     """
-    SB3's ``EvalCallback`` that also evaluates at the start and the end of training, writes each evaluation
-    to a CSV with the env steps and the training wall-clock time (evaluations excluded), stops training at a
-    wall-clock budget, and drives the progress line.
+    SB3's ``EvalCallback`` that also evaluates at the start and the end of training (so every run has two
+    evaluations at least), records the training wall-clock time of each evaluation (evaluations excluded),
+    stops training at a wall-clock budget or a return threshold, and drives the progress line. The evaluations
+    go to ``<log_path>/evaluations.npz``, as with rl-zoo's ``--eval-freq``.
 
     :param eval_env: Evaluation env.
-    :param csv_path: CSV file to write.
     :param eval_freq: Vec steps (callback calls) between evaluations; 0 for start and end only.
     :param n_eval_episodes: Episodes per evaluation.
-    :param log_path: Folder for SB3's ``evaluations.npz``.
+    :param log_path: The rl-zoo run folder (``evaluations.npz`` and ``best_model.zip`` go there).
     :param budget_seconds: Stop training after this much training wall-clock (None: no limit).
     :param progress: Progress line.
     :param stop_at: Stop training once an evaluation's mean return reaches this value (None: never).
@@ -224,7 +229,6 @@ class RecordingEvalCallback(EvalCallback):
     def __init__(
         self,
         eval_env: VecEnv,
-        csv_path: Path,
         eval_freq: int,
         n_eval_episodes: int,
         log_path: str,
@@ -241,11 +245,12 @@ class RecordingEvalCallback(EvalCallback):
             deterministic=True,
             verbose=0,
         )
-        self.csv_path = csv_path
         self.budget_seconds = budget_seconds
         self.stop_at = stop_at
         self.progress = progress
-        self.rows: list[dict[str, float]] = []
+        #: Training wall-clock (s) and total wall-clock (s) of each evaluation, in the order of evaluations.npz.
+        self.train_s: list[float] = []
+        self.total_s: list[float] = []
         self.eval_seconds = 0.0
         self._start = 0.0
 
@@ -269,46 +274,47 @@ class RecordingEvalCallback(EvalCallback):
             self.n_calls, self.eval_freq = n_calls, eval_freq
         if due:
             self.eval_seconds += time.perf_counter() - start
-            returns, lengths = self.evaluations_results[-1], self.evaluations_length[-1]
-            row = {
-                "env_steps": self.num_timesteps,
-                "wall_s": round(self.train_seconds(), 3),
-                "wall_total_s": round(time.perf_counter() - self._start, 3),
-                "mean_return": float(np.mean(returns)),
-                "std_return": float(np.std(returns)),
-                "mean_ep_length": float(np.mean(lengths)),
-            }
-            self.rows.append(row)
-            with self.csv_path.open("a", newline="") as f:
-                csv.DictWriter(f, CSV_FIELDS).writerow(row)
+            self.train_s.append(round(self.train_seconds(), 3))
+            self.total_s.append(round(time.perf_counter() - self._start, 3))
             self.progress.update(self.num_timesteps, self.train_seconds(), self.last_mean_reward, force=True)
         return continue_training
 
     def _on_training_start(self) -> None:
         super()._on_training_start()
-        with self.csv_path.open("w", newline="") as f:
-            csv.DictWriter(f, CSV_FIELDS).writeheader()
         self._start = time.perf_counter()
         self._evaluate(force=True)
 
     def _on_step(self) -> bool:
         continue_training = self._evaluate(force=False)
         train_s = self.train_seconds()
-        self.progress.update(self.num_timesteps, train_s, self.rows[-1]["mean_return"] if self.rows else None)
+        self.progress.update(self.num_timesteps, train_s, self.last_mean_reward if self.train_s else None)
         if self.budget_seconds is not None and train_s >= self.budget_seconds:
             return False
-        if self.stop_at is not None and self.rows and self.rows[-1]["mean_return"] >= self.stop_at:
+        if self.stop_at is not None and self.train_s and self.last_mean_reward >= self.stop_at:
             return False
         return continue_training
 
     def _on_training_end(self) -> None:
-        if not self.rows or self.rows[-1]["env_steps"] != self.num_timesteps:
+        if not self.evaluations_timesteps or self.evaluations_timesteps[-1] != self.num_timesteps:
             self._evaluate(force=True)
         self.progress.update(self.num_timesteps, self.train_seconds(), self.last_mean_reward, force=True)
         super()._on_training_end()
 
 
 # ---------------------------------------------------------------------------------------------- one run
+def run_folder(out: Path, algo: str, env_id: str, seed: int) -> Path:
+    """
+    The rl-zoo run folder of one (algorithm, env, seed): ``<out>/logs/<algo>/<env>_1_seed<seed>``.
+
+    :param out: Output folder.
+    :param algo: Algorithm key.
+    :param env_id: Env id.
+    :param seed: Seed.
+    :return: The folder (rl-zoo's ``ExperimentManager`` names it from ``uuid_str="_seed<seed>"``).
+    """
+    return out / "logs" / algo / f"{env_slug(env_id)}_1_seed{seed}"
+
+
 def run_one(
     algo: str,
     env_id: str,
@@ -327,7 +333,7 @@ def run_one(
     """
     Train one (algorithm, env, seed) run through rl-zoo's ExperimentManager and record its evaluations.
 
-    :param algo: Algorithm name (key of rl-zoo's ``ALGOS`` after :func:`sb3_es.zoo.register`).
+    :param algo: Algorithm key (of ``rl_zoo3.ALGOS`` after :func:`sb3_es.zoo.register`).
     :param env_id: Env id.
     :param seed: Seed.
     :param out: Output folder.
@@ -340,11 +346,12 @@ def run_one(
     :param overrides: Hyperparameters replacing the config's (as rl-zoo's ``-params``).
     :param command: Command line of the comparison, for the record.
     :param stop_at: Stop training once an evaluation reaches this mean return (None: run the whole budget).
-    :return: The run summary (also written to ``summary.json``).
+    :return: The run summary (also written to the run folder's ``summary.json``).
     """
     config, note = config_for(algo, env_id, out)
-    run_dir = out / "runs" / env_slug(env_id) / algo / f"seed{seed}"
-    run_dir.mkdir(parents=True, exist_ok=True)
+    folder = run_folder(out, algo, env_id, seed)
+    if folder.exists():  # a new run of the same (algorithm, env, seed) replaces the old one
+        shutil.rmtree(folder)
     args = argparse.Namespace(
         algo=algo, env=env_id, seed=seed, n_timesteps=steps or -1, conf_file=str(config), env_kwargs=None
     )
@@ -361,31 +368,32 @@ def run_one(
         verbose=verbose,
         config=str(config),
         hyperparams=dict(overrides) if overrides else None,
+        uuid_str=f"_seed{seed}",
     )
+    assert Path(manager.save_path) == folder, (manager.save_path, folder)
     if overrides:
         note += f"; overridden: {', '.join(f'{k}={v}' for k, v in overrides.items())}"
     setup_log = io.StringIO()
     with contextlib.redirect_stdout(setup_log if verbose == 0 else sys.stdout):
         result = manager.setup_experiment()
-    (run_dir / "setup.txt").write_text(setup_log.getvalue())
     assert result is not None
+    (folder / "setup.txt").write_text(setup_log.getvalue())
     model, hyperparams = result
     total = manager.n_timesteps
     progress = Progress(label, total if steps else None, seconds)
     n_envs = model.get_env().num_envs  # type: ignore[union-attr]
     recorder = RecordingEvalCallback(
         manager.create_envs(1, eval_env=True),
-        run_dir / "eval.csv",
         eval_freq=max(eval_freq // n_envs, 1) if eval_freq > 0 else 0,
         n_eval_episodes=eval_episodes,
-        log_path=str(run_dir),
+        log_path=str(folder),
         budget_seconds=seconds,
         progress=progress,
         stop_at=stop_at,
     )
     start = time.perf_counter()
     try:
-        model.learn(total, callback=[*manager.callbacks, recorder], tb_log_name=type(model).__name__)
+        model.learn(total, callback=[*manager.callbacks, recorder])
     finally:
         progress.close()
     total_s = time.perf_counter() - start
@@ -394,7 +402,7 @@ def run_one(
     tb_dir = model.logger.get_dir()
     model.get_env().close()  # type: ignore[union-attr]
     recorder.eval_env.close()
-    returns = [row["mean_return"] for row in recorder.rows]
+    returns = [float(np.mean(r)) for r in recorder.evaluations_results]
     summary = {
         "algo": algo,
         "algorithm": type(model).__name__,
@@ -405,6 +413,9 @@ def run_one(
         "total_seconds": round(total_s, 2),
         "final_return": returns[-1],
         "best_return": max(returns),
+        "eval_timesteps": [int(x) for x in recorder.evaluations_timesteps],
+        "eval_train_seconds": recorder.train_s,
+        "eval_total_seconds": recorder.total_s,
         "n_envs": n_envs,
         "torch_threads": torch.get_num_threads(),
         "budget_steps": steps,
@@ -415,29 +426,33 @@ def run_one(
         "config": str(config),
         "hyperparams": {k: str(v) for k, v in hyperparams.items()},
         "tensorboard_dir": tb_dir,
-        "model": f"{manager.save_path}/{manager.env_name}.zip",
-        "csv": str(run_dir / "eval.csv"),
+        "model": str(folder / f"{manager.env_name}.zip"),
         "command": command,
         "date": time.strftime("%Y-%m-%d %H:%M %Z"),
         "hardware": hardware(),
     }
-    (run_dir / "summary.json").write_text(json.dumps(summary, indent=2))
+    (folder / "summary.json").write_text(json.dumps(summary, indent=2))
     return summary
 
 
 # ---------------------------------------------------------------------------------------------- report
 def load_runs(out: Path) -> list[dict[str, Any]]:
     """
-    Every finished run in an output folder, with its evaluation rows.
+    Every finished run in an output folder: its ``summary.json`` with the evaluations of its ``evaluations.npz``.
 
     :param out: Output folder.
-    :return: Run summaries, each with a ``rows`` list.
+    :return: Run summaries, each with ``rows`` (``env_steps``, ``wall_s``, ``mean_return`` per evaluation).
     """
     runs = []
-    for summary_path in sorted((out / "runs").glob("*/*/seed*/summary.json")):
+    for summary_path in sorted((out / "logs").glob("*/*_seed*/summary.json")):
         summary = json.loads(summary_path.read_text())
-        with (summary_path.parent / "eval.csv").open() as f:
-            summary["rows"] = [{k: float(v) for k, v in row.items()} for row in csv.DictReader(f)]
+        evaluations = np.load(summary_path.parent / "evaluations.npz")
+        summary["rows"] = [
+            {"env_steps": float(steps), "wall_s": float(wall), "mean_return": float(np.mean(results))}
+            for steps, wall, results in zip(
+                evaluations["timesteps"], summary["eval_train_seconds"], evaluations["results"]
+            )
+        ]
         runs.append(summary)
     return runs
 
@@ -470,7 +485,7 @@ def aggregate(curves: list[tuple[np.ndarray, np.ndarray]], n_points: int = 200) 
 
 def plot_env(env_id: str, runs: list[dict[str, Any]], path: Path, band: str) -> None:
     """
-    One PNG: mean return against env steps (left) and against training wall-clock (right), band over seeds.
+    One PNG: mean return against training wall-clock, band over seeds (rl-zoo's ``all_plots`` draws env steps).
 
     :param env_id: Env id (title).
     :param runs: The env's runs.
@@ -482,34 +497,32 @@ def plot_env(env_id: str, runs: list[dict[str, Any]], path: Path, band: str) -> 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, 2, figsize=(12, 4.5))
+    fig, ax = plt.subplots(figsize=(7, 4.5))
     by_algo: dict[str, list[dict[str, Any]]] = defaultdict(list)
     for run in runs:
-        by_algo[run["algorithm"]].append(run)
+        by_algo[run["algo"]].append(run)
     for color_index, (name, algo_runs) in enumerate(sorted(by_algo.items())):
         color = f"C{color_index}"
-        for ax, key in zip(axes, ("env_steps", "wall_s")):
-            curves = [
-                (np.array([r[key] for r in run["rows"]]), np.array([r["mean_return"] for r in run["rows"]]))
-                for run in algo_runs
-                if run["rows"]
-            ]
-            if not curves:
-                continue
-            grid, mean, low, high, std, count = aggregate(curves)
-            shown = count == len(curves)  # where every seed has data: no jumps where one seed ends early
-            seeds = f"{len(curves)} seed" + ("s" if len(curves) > 1 else "")
-            ax.plot(grid[shown], mean[shown], color=color, label=f"{name} ({seeds})")
-            if len(curves) > 1:
-                lo, hi = (low, high) if band == "minmax" else (mean - std, mean + std)
-                ax.fill_between(grid[shown], lo[shown], hi[shown], color=color, alpha=0.2, linewidth=0)
+        curves = [
+            (np.array([r["wall_s"] for r in run["rows"]]), np.array([r["mean_return"] for r in run["rows"]]))
+            for run in algo_runs
+            if run["rows"]
+        ]
+        if not curves:
+            continue
+        grid, mean, low, high, std, count = aggregate(curves)
+        shown = count == len(curves)  # where every seed has data: no jumps where one seed ends early
+        seeds = f"{len(curves)} seed" + ("s" if len(curves) > 1 else "")
+        ax.plot(grid[shown], mean[shown], color=color, label=f"{name} ({seeds})")
+        if len(curves) > 1:
+            lo, hi = (low, high) if band == "minmax" else (mean - std, mean + std)
+            ax.fill_between(grid[shown], lo[shown], hi[shown], color=color, alpha=0.2, linewidth=0)
     band_text = "min-max over seeds" if band == "minmax" else "mean ± std over seeds"
-    for ax, xlabel in zip(axes, ("env steps", "training wall-clock (s), evaluations excluded")):
-        ax.set_xlabel(xlabel)
-        ax.set_ylabel("mean evaluation return")
-        ax.grid(alpha=0.3)
-    axes[0].legend(loc="best", fontsize="small")
-    fig.suptitle(f"{env_id}: mean over seeds, band {band_text} (drawn where every seed has data)")
+    ax.set_xlabel("training wall-clock (s), evaluations excluded")
+    ax.set_ylabel("mean evaluation return")
+    ax.grid(alpha=0.3)
+    ax.legend(loc="best", fontsize="small")
+    ax.set_title(f"{env_id}: mean over seeds, band {band_text}", fontsize="medium")
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=100)
@@ -540,7 +553,8 @@ def hardware() -> str:
 
 def write_report(out: Path, runs: list[dict[str, Any]], thresholds: dict[str, float], band: str, command: str) -> Path:
     """
-    Plots (one PNG per env) and ``results.md``.
+    The wall-clock plots (one PNG per env) and ``results.md``, the race table; the env-steps curves and rliable's
+    intervals come from rl-zoo's ``all_plots`` and ``plot_from_file`` (their commands are in the report).
 
     :param out: Output folder.
     :param runs: Runs from :func:`load_runs`.
@@ -564,18 +578,19 @@ def write_report(out: Path, runs: list[dict[str, Any]], thresholds: dict[str, fl
         f"rl-zoo3 {rl_zoo3.__version__}, torch {torch.__version__}, gymnasium {gym.__version__}",
         f"- Runs dated: {min(dates)} to {max(dates)}",
         "- Returns: mean over the evaluation episodes of the deterministic policy; across seeds, mean ± std.",
-        "  *final*: last evaluation; *best*: best evaluation during training; wall-clock excludes evaluations.",
+        "  *final*: last evaluation; *env steps*: taken (a run ends within one generation or rollout past its",
+        "  budget); wall-clock excludes evaluations.",
         "",
     ]
     by_env: dict[str, list[dict[str, Any]]] = defaultdict(list)
     for run in runs:
         by_env[run["env"]].append(run)
     for env_id, env_runs in sorted(by_env.items()):
-        png = out / "plots" / f"{env_slug(env_id)}.png"
+        png = out / "plots" / f"{env_slug(env_id)}-wallclock.png"
         plot_env(env_id, env_runs, png, band)
         threshold = thresholds.get(env_id)
-        header = "| algorithm | seeds | env steps | train wall-clock (s) | final return | best return |"
-        rule = "|---|---|---|---|---|---|"
+        header = "| algorithm | seeds | env steps | train wall-clock (s) | final return |"
+        rule = "|---|---|---|---|---|"
         if threshold is not None:
             header += f" time to return ≥ {threshold:g} |"
             rule += "---|"
@@ -597,14 +612,14 @@ def write_report(out: Path, runs: list[dict[str, Any]], thresholds: dict[str, fl
         lines += ["", header, rule]
         by_algo: dict[str, list[dict[str, Any]]] = defaultdict(list)
         for run in env_runs:
-            by_algo[run["algorithm"]].append(run)
+            by_algo[run["algo"]].append(run)
         for name, algo_runs in sorted(by_algo.items()):
             seeds = ", ".join(str(r["seed"]) for r in sorted(algo_runs, key=lambda r: r["seed"]))
             row = (
-                f"| {name} | {len(algo_runs)} ({seeds}) | {np.mean([r['env_steps'] for r in algo_runs]):,.0f} "
+                f"| {name} ({algo_runs[0]['algorithm']}) | {len(algo_runs)} ({seeds}) "
+                f"| {np.mean([r['env_steps'] for r in algo_runs]):,.0f} "
                 f"| {np.mean([r['train_seconds'] for r in algo_runs]):,.1f} "
-                f"| {_mean_std([r['final_return'] for r in algo_runs])} "
-                f"| {_mean_std([r['best_return'] for r in algo_runs])} |"
+                f"| {_mean_std([r['final_return'] for r in algo_runs])} |"
             )
             if threshold is not None:
                 reached = []
@@ -620,8 +635,21 @@ def write_report(out: Path, runs: list[dict[str, Any]], thresholds: dict[str, fl
                 else:
                     row += f" not reached (0/{len(algo_runs)} seeds) |"
             lines.append(row)
-        sources = sorted({f"{r['algorithm']}: {r['hyperparams_source']}" for r in env_runs})
-        lines += ["", "Hyperparameters: " + "; ".join(sources) + ".", "", f"![{env_id}](plots/{png.name})", ""]
+        sources = sorted({f"{r['algo']}: {r['hyperparams_source']}" for r in env_runs})
+        pickle = out / f"all_plots-{env_slug(env_id)}"
+        lines += [
+            "",
+            "Hyperparameters: " + "; ".join(sources) + ".",
+            "",
+            f"![{env_id}](plots/{png.name})",
+            "",
+            "Curves against env steps, rl-zoo's table and rliable's IQM with bootstrap intervals:",
+            "",
+            f"    python -m sb3_es.zoo all_plots -a {' '.join(sorted(by_algo))} -e {env_id} -f {out / 'logs'} "
+            f"--no-million -o {pickle}",
+            f"    python -m sb3_es.zoo plot_from_file -i {pickle}.pkl --rliable --iqm --no-million",
+            "",
+        ]
     path = out / "results.md"
     path.write_text("\n".join(lines))
     return path
@@ -702,6 +730,11 @@ def main(argv: list[str] | None = None) -> Path:
     given = argv if argv is not None else sys.argv[1:]
     command = "python benchmarks/compare.py " + " ".join(shlex.quote(a) for a in given)
     register()
+    for algo in args.algos:
+        try:
+            check_algo(algo)
+        except UsageError as e:
+            raise SystemExit(str(e)) from e
     if not args.report_only:
         if args.steps is None and args.seconds is None:
             raise SystemExit("Give a budget: --steps N (env steps), --seconds S (training wall-clock), or both.")
@@ -715,7 +748,7 @@ def main(argv: list[str] | None = None) -> Path:
         start = time.perf_counter()
         failures: list[str] = []
         for i, (env_id, algo, seed) in enumerate(plan, 1):
-            run_dir = out / "runs" / env_slug(env_id) / algo / f"seed{seed}"
+            run_dir = run_folder(out, algo, env_id, seed)
             label = f"[{i}/{len(plan)}] {algo} {env_id} seed {seed}"
             if args.skip_existing and (run_dir / "summary.json").is_file():
                 print(f"{label}: done already, skipped")
@@ -753,7 +786,7 @@ def main(argv: list[str] | None = None) -> Path:
             print(f"{len(failures)} failed: {failures}")
     runs = load_runs(out)
     if not runs:
-        raise SystemExit(f"No finished runs under {out / 'runs'}.")
+        raise SystemExit(f"No finished runs under {out / 'logs'}.")
     report = write_report(out, runs, thresholds, args.band, command)
     print(f"Report: {report}\nPlots: {out / 'plots'}\nTensorBoard: tensorboard --logdir {out / 'tb'}")
     return report

@@ -4,7 +4,7 @@ Render a saved agent to a GIF or an MP4, headless.
 Examples::
 
     # a model trained through python -m sb3_es.zoo (env id, wrappers and VecNormalize found next to it)
-    python benchmarks/render.py logs/ars/BipedalWalker-v3_1/BipedalWalker-v3.zip --out walker.gif
+    python benchmarks/render.py logs/ars_es/BipedalWalker-v3_1/BipedalWalker-v3.zip --out walker.gif
 
     # any SB3 / sb3-es save, naming the env (and the algorithm if the file does not say)
     python benchmarks/render.py model.zip --env Hopper-v5 --out hopper.mp4 --steps 1000
@@ -63,33 +63,20 @@ from stable_baselines3.common.base_class import BaseAlgorithm  # noqa: E402
 from stable_baselines3.common.env_util import make_vec_env  # noqa: E402
 from stable_baselines3.common.vec_env import VecEnv, VecNormalize  # noqa: E402
 
-from sb3_es.cli import ALGOS as SB3_ES_ALGOS  # noqa: E402
 from sb3_es.common.save_util import guess_foreign_algorithm  # noqa: E402
-from sb3_es.zoo import register_envs  # noqa: E402
+from sb3_es.zoo import register, register_envs, sb3_es_algos  # noqa: E402
 
 
 def algorithm_classes() -> dict[str, type[BaseAlgorithm]]:
     """
-    Algorithm classes by lower-case name: sb3-es's, SB3's, and sb3-contrib's when installed.
+    Algorithm classes by rl-zoo key: rl-zoo's (``ars`` is sb3-contrib's ARS) and sb3-es's (``ars_es``, ...).
 
-    :return: ``name -> class``.
+    :return: ``key -> class``.
     """
-    import stable_baselines3 as sb3
+    import rl_zoo3
 
-    classes: dict[str, type[BaseAlgorithm]] = {
-        name.lower(): getattr(sb3, name) for name in ("A2C", "DDPG", "DQN", "PPO", "SAC", "TD3")
-    }
-    try:
-        import sb3_contrib
-
-        for name in ("TQC", "TRPO", "QRDQN", "CrossQ"):
-            if hasattr(sb3_contrib, name):
-                classes[name.lower()] = getattr(sb3_contrib, name)
-        classes["ars_contrib"] = sb3_contrib.ARS
-    except ImportError:
-        pass
-    classes.update(SB3_ES_ALGOS)  # "ars" is sb3-es's ARS
-    return classes
+    register()
+    return dict(rl_zoo3.ALGOS)
 
 
 def detect_algorithm(path: Path, algo: str | None) -> type[BaseAlgorithm]:
@@ -97,7 +84,7 @@ def detect_algorithm(path: Path, algo: str | None) -> type[BaseAlgorithm]:
     The class that loads a save: ``--algo``, else the save's ``_algorithm_name``, else a guess.
 
     :param path: The ``.zip`` save.
-    :param algo: Name given on the command line (or None).
+    :param algo: rl-zoo key given on the command line (or None).
     :return: The algorithm class.
     """
     classes = algorithm_classes()
@@ -107,16 +94,18 @@ def detect_algorithm(path: Path, algo: str | None) -> type[BaseAlgorithm]:
         return classes[algo.lower()]
     with zipfile.ZipFile(path) as archive:
         data: dict[str, Any] = json.loads(archive.read("data"))
-    name = data.get("_algorithm_name")
+    ours = {cls.__name__: cls for cls in sb3_es_algos().values()}
+    name = data.get("_algorithm_name")  # the class name, written by every sb3-es save
     policy_module = str((data.get("policy_class") or {}).get("__module__", ""))
     if not name and policy_module.startswith("sb3_es.reinforce"):
-        name = "reinforce"
-    if not name:  # SB3 and sb3-contrib saves: guess from their attributes
-        name = guess_foreign_algorithm(data)
-        name = "ars_contrib" if name == "sb3-contrib's ARS" else name
-    if str(name).lower() not in classes:
-        raise SystemExit(f"Cannot tell which algorithm saved {path} (guess: {name}); pass --algo.")
-    return classes[str(name).lower()]
+        name = "REINFORCE"
+    if name in ours:
+        return ours[name]
+    guess = guess_foreign_algorithm(data)  # SB3 and sb3-contrib saves: guessed from their attributes
+    key = "ars" if guess == "sb3-contrib's ARS" else guess.lower()
+    if key not in classes:
+        raise SystemExit(f"Cannot tell which algorithm saved {path} (guess: {guess}); pass --algo.")
+    return classes[key]
 
 
 def zoo_files(model_path: Path) -> tuple[dict[str, Any], dict[str, Any], Path | None]:
@@ -232,7 +221,7 @@ def main(argv: list[str] | None = None) -> Path:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("model", type=Path, help="saved model (.zip)")
     parser.add_argument("--env", default=None, help="env id (default: from rl-zoo's args.yml next to the model)")
-    parser.add_argument("--algo", default=None, help="algorithm name, when the save does not say")
+    parser.add_argument("--algo", default=None, help="rl-zoo key (ppo, ars_es, ...), when the save does not say")
     parser.add_argument("--out", type=Path, default=None, help="output .gif or .mp4 (default: <model>.gif)")
     parser.add_argument("--steps", type=int, default=500, help="env steps to record at most")
     parser.add_argument("--episodes", type=int, default=1, help="stop after this many episodes")

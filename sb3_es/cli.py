@@ -1,34 +1,26 @@
-"""Command line: ``sb3-es quickstart`` (the README's first command) and ``sb3-es train``."""
+"""
+The ``sb3-es`` command: ``sb3-es quickstart`` (the README's first command, no extra needed) and, for everything
+else, rl-zoo's scripts with the sb3-es algorithms: ``sb3-es train|enjoy|record_video|... [rl-zoo arguments]``
+is ``python -m sb3_es.zoo ...`` (``[zoo]`` extra).
+"""
 
 from __future__ import annotations
 
 import argparse
-import json
 import os
+import sys
 import time
+from collections.abc import Sequence
 from typing import Any
 
-from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.evaluation import evaluate_policy
-from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
-from sb3_es import ARS, CMAES, PGPE, REINFORCE, OpenES, SimpleES
-
-#: Algorithms reachable from the command line, by lower-case name.
-ALGOS: dict[str, type[BaseAlgorithm]] = {
-    "ars": ARS,
-    "openes": OpenES,
-    "cmaes": CMAES,
-    "pgpe": PGPE,
-    "simple_es": SimpleES,
-    "reinforce": REINFORCE,
-}
+from sb3_es import ARS
 
 #: The quickstart run: ARS-V2 with a linear policy on Swimmer-v5 (MuJoCo ships with the ``mujoco`` wheel),
 #: with the ARS paper's Swimmer settings; seed 959 is one of the paper's seeds.
 QUICKSTART: dict[str, Any] = dict(
-    algo="ars",
     env="Swimmer-v5",
     policy="LinearPolicy",
     timesteps=300_000,
@@ -37,107 +29,99 @@ QUICKSTART: dict[str, Any] = dict(
     hyperparams=dict(n_delta=1, n_top=1, delta_std=0.01, learning_rate=0.02),
 )
 
+#: Flags of the former ``sb3-es train`` and their rl-zoo equivalents (shown when one is used).
+FORMER_FLAGS: dict[str, str] = {
+    "--timesteps": "-n N",
+    "--log-dir": "-f FOLDER (models and logs) and -tb FOLDER (TensorBoard)",
+    "--n-envs": "-params n_envs:N",
+    "--subproc": "--vec-env subproc",
+    "--policy": "-params policy:NAME",
+}
 
-def train(
-    algo: str,
-    env_id: str,
-    policy: str,
-    timesteps: int,
-    n_envs: int,
-    hyperparams: dict[str, Any],
-    log_dir: str,
-    seed: int | None,
-    subproc: bool = False,
-    n_eval_episodes: int = 10,
-    log_interval: int = 10,
-) -> tuple[BaseAlgorithm, str, str, float, float]:
+
+def quickstart(timesteps: int, log_folder: str, seed: int | None) -> tuple[ARS, str, str, float, float]:
     """
-    Train ``algo`` on ``env_id``, evaluate before and after, save the model.
+    Train :data:`QUICKSTART`, evaluate before and after, save the model, print where the logs and model are.
 
-    :param algo: Algorithm name (key of :data:`ALGOS`).
-    :param env_id: Gymnasium env id.
-    :param policy: Policy alias.
     :param timesteps: Env steps to train for.
-    :param n_envs: Number of env slots.
-    :param hyperparams: Keyword arguments for the algorithm.
-    :param log_dir: Directory for TensorBoard logs and the saved model.
+    :param log_folder: Folder of the TensorBoard run and the saved model.
     :param seed: Random seed.
-    :param subproc: Use ``SubprocVecEnv`` (one process per env) instead of ``DummyVecEnv``.
-    :param n_eval_episodes: Evaluation episodes before and after training.
-    :param log_interval: Generations between two log dumps (stdout and TensorBoard).
     :return: The model, the TensorBoard run directory, the model path, and the mean return before and after.
     """
-    if algo not in ALGOS:
-        raise ValueError(f"Unknown algorithm {algo!r}; choose one of {sorted(ALGOS)}.")
-    vec_env_cls = SubprocVecEnv if subproc else DummyVecEnv
-    env = make_vec_env(env_id, n_envs=n_envs, seed=seed, vec_env_cls=vec_env_cls)
+    env_id, n_eval_episodes = QUICKSTART["env"], 10
+    env = make_vec_env(env_id, n_envs=QUICKSTART["n_envs"], seed=seed)
     eval_env = make_vec_env(env_id, n_envs=1, seed=None if seed is None else seed + 10_000)
-    model = ALGOS[algo](policy, env, tensorboard_log=log_dir, seed=seed, verbose=1, **hyperparams)
+    model = ARS(
+        QUICKSTART["policy"], env, tensorboard_log=log_folder, seed=seed, verbose=1, **QUICKSTART["hyperparams"]
+    )
     before, _ = evaluate_policy(model, eval_env, n_eval_episodes=n_eval_episodes)
     start = time.perf_counter()
-    model.learn(timesteps, log_interval=log_interval)
+    model.learn(timesteps, log_interval=10)
     elapsed = time.perf_counter() - start
     after, _ = evaluate_policy(model, eval_env, n_eval_episodes=n_eval_episodes)
-    run_dir = model.logger.get_dir() or log_dir
-    model_path = os.path.join(log_dir, f"{algo}_{env_id.replace('/', '-')}.zip")
+    run_dir = model.logger.get_dir() or log_folder
+    model_path = os.path.join(log_folder, f"ars_es_{env_id}.zip")
     model.save(model_path)
     env.close()
     eval_env.close()
     print(
-        f"\nTrained {type(model).__name__} on {env_id} for {model.num_timesteps} env steps in {elapsed:.0f} s\n"
+        f"\nTrained ARS on {env_id} for {model.num_timesteps} env steps in {elapsed:.0f} s\n"
         f"  mean return over {n_eval_episodes} episodes: {before:.1f} before -> {after:.1f} after\n"
-        f"  TensorBoard logs: {os.path.abspath(run_dir)}   (view: tensorboard --logdir {log_dir})\n"
-        f"  Saved model:      {os.path.abspath(model_path)}   (load: {type(model).__name__}.load(path))"
+        f"  TensorBoard logs: {os.path.abspath(run_dir)}   (view: tensorboard --logdir {log_folder})\n"
+        f"  Saved model:      {os.path.abspath(model_path)}   (load: ARS.load(path))\n"
+        f"  Next: sb3-es train --algo ars_es --env {env_id} -tb {log_folder}   (rl-zoo's flags, sb3-es's configs)"
     )
     return model, run_dir, model_path, before, after  # type: ignore[return-value]
 
 
-def main(argv: list[str] | None = None) -> None:
+def check_former_flags(args: Sequence[str]) -> None:
+    """
+    Refuse the flags of the former ``sb3-es train`` with their rl-zoo equivalents.
+
+    :param args: Arguments after the command.
+    """
+    hints = [
+        f"{flag} -> {FORMER_FLAGS[flag]}"
+        for flag in dict.fromkeys(a.split("=", 1)[0] for a in args)
+        if flag in FORMER_FLAGS
+    ]
+    for i, arg in enumerate(args):  # rl-zoo's --hyperparams takes key:value pairs, not JSON
+        value = arg.split("=", 1)[1] if arg.startswith("--hyperparams=") else None
+        if arg == "--hyperparams" and i + 1 < len(args):
+            value = args[i + 1]
+        if value is not None and value.lstrip().startswith("{"):
+            hints.append("--hyperparams '{\"key\": value}' -> -params key:value ...")
+    if hints:
+        raise SystemExit(
+            "sb3-es now takes rl-zoo's flags (python -m rl_zoo3.train --help lists them): " + "; ".join(hints) + "."
+        )
+
+
+def main(argv: Sequence[str] | None = None) -> None:
     """
     Entry point of the ``sb3-es`` command.
 
     :param argv: Arguments (defaults to ``sys.argv[1:]``).
     """
-    parser = argparse.ArgumentParser(prog="sb3-es", description=__doc__)
-    sub = parser.add_subparsers(dest="command", required=True)
-    quick = sub.add_parser("quickstart", help="short real ARS run on Swimmer-v5: TensorBoard logs + saved model")
-    quick.add_argument("--timesteps", type=int, default=QUICKSTART["timesteps"])
-    quick.add_argument("--log-dir", default="runs")
-    quick.add_argument("--seed", type=int, default=QUICKSTART["seed"])
-    run = sub.add_parser("train", help="train one algorithm on one env id")
-    run.add_argument("--algo", required=True)
-    run.add_argument("--env", required=True)
-    run.add_argument("--policy", default="MlpPolicy")
-    run.add_argument("--timesteps", type=int, default=100_000)
-    run.add_argument("--n-envs", type=int, default=1)
-    run.add_argument("--subproc", action="store_true", help="one process per env (SubprocVecEnv)")
-    run.add_argument("--hyperparams", default="{}", help="JSON dict, e.g. '{\"n_delta\": 8}'")
-    run.add_argument("--log-dir", default="runs")
-    run.add_argument("--seed", type=int, default=None)
-    args = parser.parse_args(argv)
-    if args.command == "quickstart":
-        train(
-            QUICKSTART["algo"],
-            QUICKSTART["env"],
-            QUICKSTART["policy"],
-            args.timesteps,
-            QUICKSTART["n_envs"],
-            QUICKSTART["hyperparams"],
-            args.log_dir,
-            args.seed,
+    args = list(sys.argv[1:] if argv is None else argv)
+    if args[:1] == ["quickstart"]:
+        parser = argparse.ArgumentParser(
+            prog="sb3-es quickstart", description="Short real ARS run on Swimmer-v5: TensorBoard logs + saved model."
         )
-    else:
-        train(
-            args.algo.lower(),
-            args.env,
-            args.policy,
-            args.timesteps,
-            args.n_envs,
-            json.loads(args.hyperparams),
-            args.log_dir,
-            args.seed,
-            subproc=args.subproc,
-        )
+        parser.add_argument("-n", "--n-timesteps", "--timesteps", type=int, default=QUICKSTART["timesteps"])
+        parser.add_argument("-f", "--log-folder", "--log-dir", default="runs", help="TensorBoard run and model")
+        parser.add_argument("--seed", type=int, default=QUICKSTART["seed"])
+        options = parser.parse_args(args[1:])
+        quickstart(options.n_timesteps, options.log_folder, options.seed)
+        return
+    check_former_flags(args[1:])
+    try:
+        from sb3_es.zoo.commands import main as zoo_main
+    except ImportError as e:
+        raise SystemExit(f"sb3-es {' '.join(args[:1])}: {e}\n(sb3-es quickstart works without it.)") from e
+    if not args or args[0] in ("-h", "--help"):
+        print("usage: sb3-es quickstart [-n N] [-f FOLDER] [--seed S]\n       sb3-es COMMAND [rl-zoo arguments]\n")
+    zoo_main(args)
 
 
 if __name__ == "__main__":

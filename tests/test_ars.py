@@ -175,11 +175,11 @@ def test_log_interval(tmp_path: Path) -> None:
 def test_tensorboard_log(tmp_path: Path) -> None:
     model = ARS("LinearPolicy", "Pendulum-v1", n_delta=1, seed=0, tensorboard_log=str(tmp_path))
     model.learn(400)
-    run_dir = tmp_path / "ARS_1"
+    run_dir = tmp_path / "ARS_ES_1"  # not sb3-contrib's "ARS_1"
     assert run_dir.is_dir()
     assert any(p.name.startswith("events.out.tfevents") and p.stat().st_size > 0 for p in run_dir.iterdir())
     model.learn(400)  # a new run gets the next id
-    assert (tmp_path / "ARS_2").is_dir()
+    assert (tmp_path / "ARS_ES_2").is_dir()
 
 
 # ---------------------------------------------------------------------------- hyperparameters

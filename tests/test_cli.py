@@ -1,37 +1,62 @@
-"""The command line: ``sb3-es quickstart`` (the README's first command) and ``sb3-es train``."""
+"""The ``sb3-es`` command: ``quickstart`` (the README's first command) and rl-zoo's scripts with rl-zoo's flags."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
 import pytest
+from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
 from sb3_es import ARS, REINFORCE
 from sb3_es.cli import main
 
 
 def test_quickstart_writes_logs_and_model(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    main(["quickstart", "--timesteps", "4000", "--log-dir", str(tmp_path)])
+    main(["quickstart", "-n", "4000", "-f", str(tmp_path)])  # two generations, fewer than its log interval
     out = capsys.readouterr().out
-    assert (tmp_path / "ARS_1").is_dir() and any((tmp_path / "ARS_1").iterdir())
-    model_path = tmp_path / "ars_Swimmer-v5.zip"
-    assert str(model_path.resolve()) in out and "TensorBoard logs" in out
+    run_dir = tmp_path / "ARS_ES_1"
+    model_path = tmp_path / "ars_es_Swimmer-v5.zip"
+    assert str(model_path.resolve()) in out and f"TensorBoard logs: {run_dir.resolve()}" in out
     assert ARS.load(model_path).num_timesteps >= 4000
+    (events,) = run_dir.glob("events.out.tfevents.*")
+    scalars = EventAccumulator(str(events)).Reload().Tags()["scalars"]
+    assert "rollout/ep_rew_mean" in scalars  # a short run's TensorBoard file is not empty
 
 
-def test_train_any_algorithm(tmp_path: Path) -> None:
+def test_quickstart_former_option_names(tmp_path: Path) -> None:
+    main(["quickstart", "--timesteps", "2000", "--log-dir", str(tmp_path), "--seed", "0"])  # docs and Makefile
+    assert ARS.load(tmp_path / "ars_es_Swimmer-v5.zip").num_timesteps >= 2000
+
+
+def test_commands_forward_to_the_zoo(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    pytest.importorskip("rl_zoo3")
+    monkeypatch.chdir(tmp_path)
     main(
         [
-            "train",
-            *("--algo", "reinforce", "--env", "CartPole-v1", "--timesteps", "1000", "--n-envs", "2"),
-            *("--log-dir", str(tmp_path), "--seed", "0", "--hyperparams", '{"n_episodes": 4}'),
+            *("train", "--algo", "reinforce", "--env", "CartPole-v1", "-n", "1000", "--seed", "0"),
+            *("-params", "n_episodes:4", "n_envs:2", "--eval-freq", "-1", "--verbose", "0"),
         ]
     )
-    model = REINFORCE.load(tmp_path / "reinforce_CartPole-v1.zip")
-    assert model.n_episodes == 4 and model.num_timesteps >= 1000
-    assert (tmp_path / "REINFORCE_1").is_dir()
+    model = REINFORCE.load(tmp_path / "logs" / "reinforce" / "CartPole-v1_1" / "CartPole-v1.zip")
+    assert model.n_episodes == 4 and model.num_timesteps >= 1000 and model.get_env() is None
+    main(["enjoy", "--algo", "reinforce", "--env", "CartPole-v1", "--no-render", "-n", "50"])
 
 
-def test_unknown_algorithm(tmp_path: Path) -> None:
-    with pytest.raises(ValueError, match="Unknown algorithm 'nope'"):
-        main(["train", "--algo", "nope", "--env", "CartPole-v1", "--log-dir", str(tmp_path)])
+@pytest.mark.parametrize(
+    "args, hint",
+    [
+        (["--timesteps", "1000"], "--timesteps -> -n N"),
+        (["--log-dir", "runs"], "--log-dir -> -f FOLDER"),
+        (["--hyperparams", '{"n_episodes": 4}'], "-params key:value"),
+        (["--n-envs", "4", "--subproc"], "--n-envs -> -params n_envs:N; --subproc -> --vec-env subproc"),
+    ],
+)
+def test_former_train_flags_say_what_to_use(args: list[str], hint: str) -> None:
+    with pytest.raises(SystemExit, match=hint):
+        main(["train", "--algo", "reinforce", "--env", "CartPole-v1", *args])
+
+
+def test_unknown_algorithm() -> None:
+    pytest.importorskip("rl_zoo3")
+    with pytest.raises(SystemExit):  # rl-zoo's own argparse error: invalid choice 'nope'
+        main(["train", "--algo", "nope", "--env", "CartPole-v1"])

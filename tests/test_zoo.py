@@ -1,39 +1,51 @@
-"""rl-baselines3-zoo integration (sb3_es.zoo), the hyperparameter files, benchmarks/compare.py and render.py."""
+"""rl-baselines3-zoo with the sb3-es algorithms (sb3_es.zoo), packaged configs, benchmarks/compare.py, render.py."""
 
 from __future__ import annotations
 
 import argparse
-import csv
 import importlib.util
 import os
+import re
+import shutil
 import subprocess
 import sys
+import zipfile
 from pathlib import Path
 from types import ModuleType
 from typing import Any
 
+import numpy as np
 import pytest
 import torch
 import yaml
 
 pytest.importorskip("rl_zoo3")
 
+import optuna  # noqa: E402
 import rl_zoo3  # noqa: E402
-import rl_zoo3.enjoy  # noqa: E402
-import rl_zoo3.exp_manager  # noqa: E402
+import rl_zoo3.hyperparams_opt  # noqa: E402
 import rl_zoo3.train  # noqa: E402
+from rl_zoo3.exp_manager import ExperimentManager  # noqa: E402
+from stable_baselines3.common.callbacks import BaseCallback  # noqa: E402
 
 from sb3_es import ARS  # noqa: E402
+from sb3_es.common.population_algorithm import PopulationAlgorithm  # noqa: E402
 from sb3_es.zoo import (  # noqa: E402
+    ALGOS,
     HYPERPARAMS_DIR,
-    ExperimentManager,
+    UsageError,
     default_conf_file,
+    main,
     prepare_args,
     register,
-    sb3_es_algos,
 )
+from sb3_es.zoo.hyperparams_opt import CONVERTERS, SAMPLERS  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
+KEYS = tuple(ALGOS)
+#: Keys whose files cover every env of ENVS (the others cover QUICK_ENVS: untested settings, run by the lead).
+FULL_KEYS = ("ars_es", "openes", "cmaes", "reinforce")
+#: Envs the files of FULL_KEYS cover.
 ENVS = (
     "BipedalWalker-v3",
     "Pendulum-v1",
@@ -45,18 +57,35 @@ ENVS = (
     "dm_control/walker-walk-v0",
     "dm_control/cheetah-run-v0",
 )
-#: Envs whose models are built in the tests (the MuJoCo/dm_control entries are parsed, not built).
+#: rl-zoo's ARS envs that ars_es.yml also covers, with the rl-zoo ars.yml entry each one translates.
+ARS_ZOO_ENVS = {
+    "CartPole-v1": "CartPole-v1",
+    "LunarLander-v3": "LunarLander-v3",
+    "Acrobot-v1": "Acrobot-v1",
+    "MountainCar-v0": "MountainCar-v0",
+    "MountainCarContinuous-v0": "MountainCarContinuous-v0",
+    "Ant-v5": "Ant-v4",
+    "Humanoid-v5": "Humanoid-v4",
+    "BipedalWalkerHardcore-v3": "BipedalWalkerHardcore-v3",
+}
+#: Envs whose models are built in the tests (the MuJoCo/dm_control entries of every file are parsed, not built).
 QUICK_ENVS = ("BipedalWalker-v3", "Pendulum-v1", "LunarLanderContinuous-v3")
-ALGOS = ("ars", "openes", "cmaes", "reinforce")
-#: Algorithms whose files have entries for QUICK_ENVS only (pgpe.yml: untested settings, run by the lead).
-QUICK_ONLY_ALGOS = ("pgpe",)
+#: rl-zoo ``-params`` that keep a generation (an update) of each algorithm small on Pendulum-v1.
+SMALL = {
+    "ars_es": ["n_delta:2"],
+    "openes": ["population_size:4"],
+    "cmaes": ["population_size:4"],
+    "pgpe": ["population_size:4"],
+    "simple_es": ["population_size:4"],
+    "reinforce": ["n_episodes:2"],
+}
 
 
 def manager(algo: str, env_id: str, folder: Path, n_timesteps: int = 0, **kwargs: Any) -> ExperimentManager:
-    """An sb3-es ExperimentManager as rl_zoo3.train builds it, logging under ``folder``."""
+    """rl-zoo's own ExperimentManager, as rl_zoo3.train builds it, with the packaged file of an sb3-es algorithm."""
     register()
-    config = str(default_conf_file(algo)) if algo in sb3_es_algos() else None
     args = argparse.Namespace(algo=algo, env=env_id, env_kwargs=None)
+    kwargs.setdefault("config", str(default_conf_file(algo)))
     return ExperimentManager(
         args,
         algo,
@@ -67,16 +96,28 @@ def manager(algo: str, env_id: str, folder: Path, n_timesteps: int = 0, **kwargs
         seed=0,
         log_interval=-1,  # rl_zoo3.train's default (the constructor's 0 would mean "every 0 updates")
         verbose=0,
-        config=config,
         **kwargs,
     )
 
 
+def zoo(*args: str) -> None:
+    """``python -m sb3_es.zoo ARGS``, in this process."""
+    main(list(args))
+
+
+@pytest.fixture(autouse=True)
+def torch_threads() -> Any:
+    """rl-zoo's ``--num-threads`` (used below: one thread is faster for these small networks) is process-wide."""
+    threads = torch.get_num_threads()
+    yield
+    torch.set_num_threads(threads)
+
+
 def run(args: list[str], cwd: Path) -> subprocess.CompletedProcess:
-    """Run a command with this interpreter; fail with its output."""
+    """Run a command with this interpreter and this tree's sb3_es; fail with its output."""
     env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     proc = subprocess.run(
-        [sys.executable, *args], cwd=cwd, env=env, capture_output=True, text=True, timeout=300, check=False
+        [sys.executable, *args], cwd=cwd, env=env, capture_output=True, text=True, timeout=900, check=False
     )
     assert proc.returncode == 0, f"{args} failed:\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}"
     return proc
@@ -91,41 +132,54 @@ def load_script(name: str) -> ModuleType:
     return module
 
 
-# ----------------------------------------------------------------------------------------------- registration
-def test_register_adds_algorithms_everywhere() -> None:
+# ----------------------------------------------------------------------------------------------- own names
+def test_register_uses_rl_zoo_registries_only() -> None:
     ours = register()
-    assert {"ars", "openes", "cmaes"} <= set(ours)
-    for module in (rl_zoo3, rl_zoo3.train, rl_zoo3.exp_manager, rl_zoo3.enjoy):
-        for name, cls in ours.items():
-            assert module.ALGOS[name] is cls
-    assert rl_zoo3.ALGOS["ars"] is ARS
-    assert rl_zoo3.train.ExperimentManager is ExperimentManager
+    assert set(ours) == set(KEYS) and "ars_es" in ours
+    for key, cls in ours.items():
+        assert rl_zoo3.ALGOS[key] is cls
+        assert rl_zoo3.hyperparams_opt.HYPERPARAMS_SAMPLER[key] is SAMPLERS[key]
+        assert rl_zoo3.hyperparams_opt.HYPERPARAMS_CONVERTER[key] is CONVERTERS[key]
+    # rl-zoo's own algorithms and machinery are left alone: "ars" is still sb3-contrib's ARS
+    assert rl_zoo3.ALGOS["ars"].__module__.startswith("sb3_contrib")
     assert rl_zoo3.ALGOS["ppo"].__module__.startswith("stable_baselines3")
+    assert rl_zoo3.train.ExperimentManager is ExperimentManager
+    assert ExperimentManager.__module__ == "rl_zoo3.exp_manager"
+    assert all(cls.__module__.startswith("sb3_es.") for cls in ours.values())
 
 
-def test_prepare_args_defaults() -> None:
-    conf = str(HYPERPARAMS_DIR / "ars.yml")
-    assert prepare_args("train", ["--algo", "ars", "--env", "Pendulum-v1"])[-2:] == ["--conf-file", conf]
-    assert prepare_args("train", ["--algo=openes"])[-1] == str(HYPERPARAMS_DIR / "openes.yml")
-    given = ["--algo", "ars", "-conf", "mine.yml"]
-    assert prepare_args("train", given) == given
-    assert prepare_args("train", ["--algo", "ars", "--conf-file=mine.yml"]) == ["--algo", "ars", "--conf-file=mine.yml"]
-    # rl-zoo's own algorithms keep rl-zoo's own hyperparameters
-    assert prepare_args("train", ["--algo", "ppo", "--env", "Pendulum-v1"]) == ["--algo", "ppo", "--env", "Pendulum-v1"]
-    assert prepare_args("train", ["--env", "Pendulum-v1"]) == ["--env", "Pendulum-v1"]
-    assert prepare_args("enjoy", ["--algo", "ars"])[-2:] == ["-f", "logs"]
-    assert prepare_args("enjoy", ["--algo", "ars", "-f", "x"]) == ["--algo", "ars", "-f", "x"]
+@pytest.mark.parametrize("key", KEYS)
+def test_every_key_has_a_config_and_a_sampler(key: str) -> None:
+    assert key not in ("ars", "ppo", "sac", "td3", "a2c", "dqn", "ddpg", "qrdqn", "tqc", "trpo", "ppo_lstm", "crossq")
+    data = yaml.safe_load(default_conf_file(key).read_text())
+    assert "default" in data
+    assert key in SAMPLERS and key in CONVERTERS
 
 
-# ----------------------------------------------------------------------------------------------- YAML files
-@pytest.mark.parametrize("algo", ALGOS)
+@pytest.mark.parametrize("command", ["train", "enjoy", "record_video", "push_to_hub", "load_from_hub"])
+def test_old_ars_key_is_refused_with_the_new_one(command: str) -> None:
+    with pytest.raises(UsageError, match=r"--algo ars is sb3-contrib's ARS in rl-zoo; sb3-es's ARS is --algo ars_es"):
+        prepare_args(command, ["--algo", "ars", "--env", "Pendulum-v1"])
+    with pytest.raises(SystemExit, match="--algo ars_es"):
+        zoo(command, "--algo", "ars", "--env", "Pendulum-v1")
+
+
+def test_tensorboard_run_name_is_not_sb3_contribs(tmp_path: Path) -> None:
+    ARS("LinearPolicy", "Pendulum-v1", n_delta=1, tensorboard_log=str(tmp_path)).learn(400)
+    assert [p.name for p in tmp_path.iterdir()] == ["ARS_ES_1"]
+
+
+# ----------------------------------------------------------------------------------------------- packaged configs
+@pytest.mark.parametrize("algo", KEYS)
 def test_hyperparameter_files_parse(algo: str, tmp_path: Path) -> None:
     path = HYPERPARAMS_DIR / f"{algo}.yml"
+    assert path.parent == ROOT / "sb3_es" / "hyperparams"
     text = path.read_text()
     data = yaml.safe_load(text)
-    assert set(ENVS) <= set(data), f"{path} misses {set(ENVS) - set(data)}"
+    envs = ENVS if algo in FULL_KEYS else QUICK_ENVS
+    assert set(envs) <= set(data), f"{path} misses {set(envs) - set(data)}"
     lines = text.splitlines()
-    for env_id in ENVS:
+    for env_id in envs:
         # each entry is preceded by a comment saying where its values come from
         index = lines.index(f"{env_id}:")
         assert lines[index - 1].startswith("#"), f"{path}: no source comment above {env_id}"
@@ -133,139 +187,367 @@ def test_hyperparameter_files_parse(algo: str, tmp_path: Path) -> None:
         assert entry["policy"] in ("LinearPolicy", "MlpPolicy", "MultiInputPolicy")
         assert entry["n_timesteps"] > 0
         assert "normalize" not in entry  # observation normalization is done by the policies
-    if algo not in sb3_es_algos():
-        pytest.skip(f"{algo} is not importable")
-    for env_id in ENVS:
+    for env_id in envs:
         # rl-zoo's own parsing and preprocessing (schedules, policy_kwargs strings, n_envs)
-        zoo = manager(algo, env_id, tmp_path)
-        hyperparams, _ = zoo.read_hyperparameters()
-        processed, *_ = zoo._preprocess_hyperparams(hyperparams)
+        zoo_manager = manager(algo, env_id, tmp_path)
+        hyperparams, _ = zoo_manager.read_hyperparameters()
+        processed, *_ = zoo_manager._preprocess_hyperparams(hyperparams)
         assert "n_timesteps" not in processed and "n_envs" not in processed
         assert isinstance(processed.get("policy_kwargs", {}), dict)
-        if "learning_rate" in processed:
-            assert isinstance(processed["learning_rate"], float)  # kept a float (OpenES decays it)
 
 
-@pytest.mark.parametrize("env_id", QUICK_ENVS)
-@pytest.mark.parametrize("algo", ALGOS + QUICK_ONLY_ALGOS)
+def test_ars_file_covers_rl_zoos_ars_envs() -> None:
+    path = HYPERPARAMS_DIR / "ars_es.yml"
+    lines = path.read_text().splitlines()
+    ours = yaml.safe_load(path.read_text())
+    theirs = yaml.safe_load((Path(rl_zoo3.__file__).parent / "hyperparams" / "ars.yml").read_text())
+    for env_id, zoo_id in ARS_ZOO_ENVS.items():
+        assert "untested" in lines[lines.index(f"{env_id}:") - 1], f"{env_id}: the comment must say untested"
+        entry, source = ours[env_id], theirs[zoo_id]
+        for key in ("n_timesteps", "policy", "learning_rate", "delta_std", "n_delta", "n_top", "alive_bonus_offset"):
+            if key in source:
+                assert entry[key] == source[key], (env_id, key)
+        assert entry.get("zero_policy", True) == source.get("zero_policy", True)
+        if "normalize" not in source:  # rl-zoo without VecNormalize: no observation normalization (ARS-V1)
+            assert "normalize_observations=False" in entry["policy_kwargs"]
+        if "net_arch" in str(source.get("policy_kwargs")):
+            assert source["policy_kwargs"].split("net_arch=")[1] in entry["policy_kwargs"]
+
+
+@pytest.mark.parametrize(
+    "algo, env_id",
+    [(algo, env_id) for algo in KEYS for env_id in QUICK_ENVS] + [("ars_es", env_id) for env_id in ARS_ZOO_ENVS],
+)
 def test_entries_build_models(algo: str, env_id: str, tmp_path: Path) -> None:
-    if algo not in sb3_es_algos():
-        pytest.skip(f"{algo} is not importable")
-    zoo = manager(algo, env_id, tmp_path)
-    result = zoo.setup_experiment()
+    zoo_manager = manager(algo, env_id, tmp_path)
+    result = zoo_manager.setup_experiment()
     assert result is not None
     model, saved = result
     try:
-        assert type(model) is sb3_es_algos()[algo]
+        assert type(model) is ALGOS[algo]
+        # rl-zoo's n_envs: one VecEnv whose slots evaluate different candidates (no "ars" special case)
         assert model.get_env().num_envs == saved.get("n_envs", 1)  # type: ignore[union-attr]
-        assert model.device.type == "cpu"
+        if isinstance(model, PopulationAlgorithm):
+            assert model.device.type == "cpu"  # rl-zoo passes device="auto"
+        if "learning_rate" in saved:  # rl-zoo makes a ConstantSchedule of it; the model keeps the number
+            assert model.learning_rate == saved["learning_rate"]
     finally:
         model.get_env().close()  # type: ignore[union-attr]
 
 
-# ----------------------------------------------------------------------------------------------- ARS special case
-def test_ars_n_envs_2_gets_a_vec_env_and_no_async_eval(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    def no_async_eval(*args: Any, **kwargs: Any) -> None:
-        raise AssertionError("rl-zoo's AsyncEval path was taken for sb3-es's ARS")
-
-    monkeypatch.setattr(rl_zoo3.exp_manager, "AsyncEval", no_async_eval)
-    zoo = manager("ars", "Pendulum-v1", tmp_path, n_timesteps=1600)
-    result = zoo.setup_experiment()
-    assert result is not None
-    model, _ = result
-    assert zoo.n_envs == 2 and model.get_env().num_envs == 2  # type: ignore[union-attr]
-    zoo.learn(model)  # rl-zoo's learn(): would build AsyncEval for "ars" with n_envs > 1
-    assert model.num_timesteps >= 1600
-    assert zoo.n_envs == 2
-
-
-def test_optimize_is_refused(tmp_path: Path) -> None:
-    zoo = manager("ars", "Pendulum-v1", tmp_path, optimize_hyperparameters=True)
-    with pytest.raises(ValueError, match="not supported"):
-        zoo.setup_experiment()
+def test_default_fallback_is_logged(capsys: pytest.CaptureFixture[str]) -> None:
+    args = prepare_args("train", ["--algo", "openes", "--env", "CartPole-v1"])
+    assert args[-2:] == ["--conf-file", str(HYPERPARAMS_DIR / "openes.yml")]
+    out = capsys.readouterr().out
+    assert "has no CartPole-v1 entry: openes trains with its 'default' entry" in out
+    assert "n_timesteps=1000000.0" in out
+    prepare_args("train", ["--algo", "ars_es", "--env", "CartPole-v1"])
+    assert "from the CartPole-v1 entry" in capsys.readouterr().out
+    # rl-zoo's own algorithms keep rl-zoo's own files and defaults
+    assert prepare_args("train", ["--algo", "ppo", "--env", "Pendulum-v1"]) == ["--algo", "ppo", "--env", "Pendulum-v1"]
+    assert prepare_args("enjoy", ["--algo", "cmaes"])[-2:] == ["-f", "logs"]
+    assert prepare_args("enjoy", ["--algo", "cmaes", "--folder=x"]) == ["--algo", "cmaes", "--folder=x"]
+    given = ["--algo", "ars_es", "--env", "Pendulum-v1", "-conf", str(HYPERPARAMS_DIR / "ars_es.yml")]
+    assert prepare_args("train", given) == given
 
 
-# ----------------------------------------------------------------------------------------------- command line
+def test_wheel_ships_the_configs(tmp_path: Path) -> None:
+    source = tmp_path / "src"
+    shutil.copytree(ROOT / "sb3_es", source / "sb3_es", ignore=shutil.ignore_patterns("__pycache__"))
+    for name in ("pyproject.toml", "README.md", "LICENSE"):
+        shutil.copy(ROOT / name, source / name)
+    run(["-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q", str(source), "-w", str(tmp_path)], tmp_path)
+    (wheel,) = tmp_path.glob("sb3_es-*.whl")
+    names = zipfile.ZipFile(wheel).namelist()
+    for key in KEYS:
+        assert f"sb3_es/hyperparams/{key}.yml" in names
+    assert "sb3_es/zoo/__main__.py" in names
+
+
+def test_zoo_extra_has_rl_zoos_plot_dependencies() -> None:
+    pyproject = (ROOT / "pyproject.toml").read_text()
+    for extra in ("zoo", "dev"):
+        match = re.search(rf"^{extra} = \[(.*?)\]$", pyproject, re.MULTILINE | re.DOTALL)
+        assert match is not None, extra
+        assert '"rl_zoo3[plots]' in match.group(1), extra  # seaborn, pandas, scipy, rliable
+        assert '"moviepy' in match.group(1), extra  # record_video
+    pins = (ROOT / "constraints.txt").read_text()
+    for package in ("seaborn", "pandas", "rliable", "scipy"):
+        assert re.search(rf"^{package}==", pins, re.MULTILINE), package
+    import rl_zoo3.plots  # noqa: F401  (imports seaborn, pandas, pytablewriter, scipy)
+
+
+# ----------------------------------------------------------------------------------------------- every zoo command
 @pytest.fixture(scope="module")
-def trained_ars(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """``python -m sb3_es.zoo train --algo ars`` on Pendulum-v1 (n_envs: 2 in ars.yml); the log folder."""
+def runs(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """``train`` of every sb3-es algorithm on Pendulum-v1 (small generations, two evaluations); the folder."""
     folder = tmp_path_factory.mktemp("zoo")
-    run(
-        ["-m", "sb3_es.zoo", "train", "--algo", "ars", "--env", "Pendulum-v1", "-n", "2000", "--seed", "0"]
-        + ["-f", "logs", "--n-eval-envs", "1", "--eval-freq", "-1", "--verbose", "0"],
-        folder,
-    )
+    for key in KEYS:
+        zoo(
+            *("train", "--algo", key, "--env", "Pendulum-v1", "-n", "800", "--seed", "0", "-f", str(folder / "logs")),
+            *("-tb", str(folder / "tb"), "--eval-freq", "400", "--eval-episodes", "2", "--verbose", "0"),
+            *("--num-threads", "1", "-params", *SMALL.get(key, [])),
+        )
     return folder
 
 
-def test_train_command_writes_model(trained_ars: Path) -> None:
-    run_dir = trained_ars / "logs" / "ars" / "Pendulum-v1_1"
-    assert (run_dir / "Pendulum-v1.zip").is_file()
-    # two monitor files: one VecEnv with 2 slots (rl-zoo's ARS path would have a single training env)
+@pytest.mark.parametrize("key", KEYS)
+def test_train_writes_rl_zoos_layout(runs: Path, key: str) -> None:
+    run_dir = runs / "logs" / key / "Pendulum-v1_1"
+    model = ALGOS[key].load(run_dir / "Pendulum-v1.zip")
+    assert model.num_timesteps >= 800
+    evaluations = np.load(run_dir / "evaluations.npz")
+    assert len(evaluations["timesteps"]) >= 2 and evaluations["results"].shape[1] == 2
+    # one VecEnv with n_envs: 2 slots (rl-zoo's "ars" path would have a single training env)
     assert sorted(p.name for p in run_dir.glob("*.monitor.csv")) == ["0.monitor.csv", "1.monitor.csv"]
     config = yaml.load((run_dir / "Pendulum-v1" / "config.yml").read_text(), Loader=yaml.UnsafeLoader)
     assert dict(config)["n_envs"] == 2
-    model = ARS.load(run_dir / "Pendulum-v1.zip")
-    assert model.num_timesteps >= 2000
+    tb_name = {"ars_es": "ARS_ES_1"}.get(key, f"{ALGOS[key].__name__}_1")
+    assert (runs / "tb" / "Pendulum-v1" / tb_name).is_dir()
 
 
-def test_enjoy_command(trained_ars: Path) -> None:
-    proc = run(
-        ["-m", "sb3_es.zoo", "enjoy", "--algo", "ars", "--env", "Pendulum-v1", "--no-render", "-n", "250"], trained_ars
+@pytest.mark.parametrize("key", KEYS)
+def test_enjoy(runs: Path, key: str, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    monkeypatch.chdir(runs)  # enjoy's default folder for sb3-es algorithms: logs
+    zoo("enjoy", "--algo", key, "--env", "Pendulum-v1", "--no-render", "-n", "250", "--verbose", "1")
+    out = capsys.readouterr().out
+    assert f"logs/{key}/Pendulum-v1_1/Pendulum-v1.zip" in out and "Episode Reward" in out
+
+
+@pytest.mark.parametrize("key", KEYS)
+def test_record_video(runs: Path, key: str, tmp_path: Path) -> None:
+    zoo(
+        "record_video", "--algo", key, "--env", "Pendulum-v1", "-f", str(runs / "logs"), "-n", "20", "-o", str(tmp_path)
     )
-    assert "Episode Reward" in proc.stdout
+    (video,) = tmp_path.glob("*.mp4")
+    assert video.name.startswith(f"final-model-{key}-Pendulum-v1") and video.stat().st_size > 1000
 
 
-def test_ppo_through_the_same_entry_point(tmp_path: Path) -> None:
-    proc = run(
-        ["-m", "sb3_es.zoo", "train", "--algo", "ppo", "--env", "Pendulum-v1", "-n", "64", "--seed", "0"]
-        + ["-f", "logs", "--eval-freq", "-1", "--verbose", "0", "--num-threads", "1"]
-        + ["-params", "n_steps:32", "batch_size:32", "n_epochs:1", "n_envs:2"],
-        tmp_path,
+def test_record_training(runs: Path, tmp_path: Path) -> None:
+    # rl-zoo runs `python -m rl_zoo3.record_video` (once per model: the final one only here) and ffmpeg in new
+    # processes, which must know the sb3-es keys
+    run_dir = tmp_path / "logs" / "ars_es" / "Pendulum-v1_1"
+    shutil.copytree(runs / "logs" / "ars_es" / "Pendulum-v1_1", run_dir, ignore=shutil.ignore_patterns("best_model*"))
+    out = tmp_path / "videos"
+    run(["-m", "sb3_es.zoo", "record_training", "--algo", "ars_es", "--env", "Pendulum-v1"]
+        + ["-f", str(tmp_path / "logs"), "-n", "20", "-o", str(out)], tmp_path)  # fmt: skip
+    assert (out / "training.mp4").stat().st_size > 1000
+
+
+def test_all_plots_and_plot_train(runs: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    pytest.importorskip("seaborn")
+    pickle = tmp_path / "results"
+    zoo("all_plots", "-a", *KEYS, "-e", "Pendulum-v1", "-f", str(runs / "logs"), "--no-display", "-o", str(pickle))
+    table = capsys.readouterr().out
+    for key in KEYS:
+        assert key.upper() in table
+    assert "0.0 +/- 0.0" not in table  # every run was found and read
+    assert pickle.with_suffix(".pkl").is_file()
+    for key in KEYS:
+        zoo("plot_train", "-a", key, "-e", "Pendulum-v1", "-f", str(runs / "logs"))
+
+
+def test_push_to_hub_uses_the_sb3_es_name(runs: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    import huggingface_hub
+
+    hf_push = importlib.import_module("huggingface_sb3.push_to_hub")  # the package exports a function of that name
+    if not hasattr(hf_push, "generate_metadata"):
+        # rl-zoo3 2.9.2's push_to_hub imports generate_metadata, which sb3-team-hf-integration 3.2 calls
+        # _generate_metadata: rl-zoo's push_to_hub does not import at all there, for any algorithm
+        monkeypatch.setattr(hf_push, "generate_metadata", hf_push._generate_metadata, raising=False)
+
+    seen: dict[str, Any] = {}
+
+    def create_repo(self: Any, repo_id: str, **kwargs: Any) -> None:
+        seen["repo_id"] = repo_id
+        raise ConnectionAbortedError("no network in the tests")
+
+    monkeypatch.setattr(huggingface_hub.HfApi, "create_repo", create_repo)
+    monkeypatch.chdir(runs)
+    with pytest.raises(ConnectionAbortedError):
+        zoo("push_to_hub", "--algo", "ars_es", "--env", "Pendulum-v1", "-f", "logs", "-orga", "someone", "--no-render")
+    assert seen["repo_id"] == "someone/ars_es-Pendulum-v1"
+
+
+def test_load_from_hub_uses_the_sb3_es_name(runs: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    import huggingface_sb3
+
+    run_dir = runs / "logs" / "ars_es" / "Pendulum-v1_1"
+    metrics = tmp_path / "train_eval_metrics.zip"
+    with zipfile.ZipFile(metrics, "w") as archive:
+        archive.write(run_dir / "evaluations.npz", "evaluations.npz")
+    files = {
+        "ars_es-Pendulum-v1.zip": run_dir / "Pendulum-v1.zip",
+        "config.yml": run_dir / "Pendulum-v1" / "config.yml",
+        "args.yml": run_dir / "Pendulum-v1" / "args.yml",
+        "env_kwargs.yml": run_dir / "Pendulum-v1" / "config.yml",
+        "train_eval_metrics.zip": metrics,
+    }
+    asked: list[tuple[str, str]] = []
+
+    def load_from_hub(repo_id: str, filename: str) -> str:
+        asked.append((repo_id, filename))
+        if filename not in files:
+            from requests.exceptions import HTTPError
+
+            raise HTTPError(f"{filename} not in the fake hub")
+        return str(files[filename])
+
+    monkeypatch.setattr(huggingface_sb3, "load_from_hub", load_from_hub)
+    zoo("load_from_hub", "--algo", "ars_es", "--env", "Pendulum-v1", "-f", str(tmp_path / "logs"), "-orga", "someone")
+    assert asked[0] == ("someone/ars_es-Pendulum-v1", "ars_es-Pendulum-v1.zip")
+    model = ARS.load(tmp_path / "logs" / "ars_es" / "Pendulum-v1_1" / "Pendulum-v1.zip")
+    assert model.num_timesteps >= 800
+
+
+def test_ppo_through_the_same_entry_point(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    zoo(
+        *("train", "--algo", "ppo", "--env", "Pendulum-v1", "-n", "64", "--seed", "0", "-f", str(tmp_path / "logs")),
+        *("--eval-freq", "-1", "--verbose", "0", "--num-threads", "1"),
+        *("-params", "n_steps:32", "batch_size:32", "n_epochs:1", "n_envs:2"),
     )
-    assert f"{Path(rl_zoo3.__file__).parent / 'hyperparams' / 'ppo.yml'}" in proc.stdout  # rl-zoo's own file
+    assert f"{Path(rl_zoo3.__file__).parent / 'hyperparams' / 'ppo.yml'}" in capsys.readouterr().out
     assert (tmp_path / "logs" / "ppo" / "Pendulum-v1_1" / "Pendulum-v1.zip").is_file()
 
 
+def test_continuing_applies_new_values(runs: Path, tmp_path: Path) -> None:
+    trained = runs / "logs" / "ars_es" / "Pendulum-v1_1" / "Pendulum-v1.zip"
+    assert ARS.load(trained).delta_std == 0.1  # the Pendulum-v1 entry
+    zoo(
+        *("train", "--algo", "ars_es", "--env", "Pendulum-v1", "-i", str(trained), "-n", "400", "--seed", "1"),
+        *("-f", str(tmp_path / "logs"), "--eval-freq", "-1", "--verbose", "0"),
+        *("-params", "delta_std:0.05", "n_delta:1", "n_top:1"),
+    )
+    model = ARS.load(tmp_path / "logs" / "ars_es" / "Pendulum-v1_1" / "Pendulum-v1.zip")
+    assert model.delta_std == 0.05 and model.strategy.delta_std == 0.05  # the value the last generation used
+    assert model.strategy.n_delta == 1 and model.num_timesteps >= 400  # (rl-zoo restarts the step count)
+    assert not np.array_equal(model.strategy.center, ARS.load(trained).strategy.center)  # trained on from there
+
+
+# ----------------------------------------------------------------------------------------------- hyperparameter search
+@pytest.mark.parametrize("key", KEYS)
+def test_optimize_two_trials(key: str, tmp_path: Path) -> None:
+    # CartPole-v1 for the population methods (short episodes whatever the sampled population), Pendulum-v1 for
+    # REINFORCE (Box actions: n_bins is sampled)
+    env_id = "Pendulum-v1" if key == "reinforce" else "CartPole-v1"
+    extra = ["-params", "n_episodes:2"] if key == "reinforce" else []
+    zoo(
+        *("train", "--algo", key, "--env", env_id, "-optimize", "--n-trials", "2", "-n", "400"),
+        *("--n-evaluations", "2", "--eval-episodes", "1", "--no-optim-plots", "-f", str(tmp_path), "--seed", "0"),
+        *("--n-startup-trials", "1", "--verbose", "0", "--num-threads", "1", *extra),
+    )
+    (report,) = (tmp_path / key).glob("report_*.csv")
+    lines = report.read_text().splitlines()
+    assert len(lines) == 3  # header + 2 trials
+    sampled = {"ars_es": "n_delta_pow", "cmaes": "sigma", "pgpe": "stdev_init", "reinforce": "n_bins"}
+    sampled.update(openes="population_size_pow", simple_es="elite_fraction")
+    assert f"params_{sampled[key]}" in lines[0]
+
+
+def test_pruning_on_evaluations(tmp_path: Path) -> None:
+    zoo_manager = manager("openes", "CartPole-v1", tmp_path, n_timesteps=4000, optimize_hyperparameters=True)
+    zoo_manager.n_evaluations = 4
+    assert zoo_manager.setup_experiment() is None
+    sampler = optuna.samplers.RandomSampler(seed=0)
+    study = optuna.create_study(sampler=sampler, direction="maximize", pruner=optuna.pruners.ThresholdPruner(lower=1e9))
+    study.optimize(zoo_manager.objective, n_trials=1)
+    (trial,) = study.trials
+    assert trial.state == optuna.trial.TrialState.PRUNED
+    assert list(trial.intermediate_values) == [1]  # stopped at its first evaluation (of 4 or more)
+    kept = optuna.create_study(sampler=sampler, direction="maximize", pruner=optuna.pruners.NopPruner())
+    kept.optimize(zoo_manager.objective, n_trials=1)
+    # every 1,000 env steps until learn() ends, within one generation past 4,000 steps
+    assert kept.trials[0].state == optuna.trial.TrialState.COMPLETE
+    assert len(kept.trials[0].intermediate_values) >= 4
+
+
 # ----------------------------------------------------------------------------------------------- benchmarks
-def test_compare_tiny_budget(tmp_path: Path) -> None:
+def test_compare_writes_rl_zoos_layout(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     pytest.importorskip("matplotlib")
     compare = load_script("compare")
     out = tmp_path / "cmp"
     threads = torch.get_num_threads()  # compare.py sets 1 thread (its default): restore it for the other tests
     try:
         report = compare.main(
-            ["--algos", "ars", "ppo", "--envs", "Pendulum-v1", "--seeds", "0", "--steps", "1600", "--eval-freq", "800"]
-            + ["--eval-episodes", "1", "--out", str(out), "--threshold", "Pendulum-v1=-2000"]
-            + ["--override", "ppo:n_steps=64", "ppo:batch_size=64", "ppo:n_epochs=1", "ppo:n_envs=2"]
+            ["--algos", "ars_es", "cmaes", "--envs", "Pendulum-v1", "--seeds", "0", "1", "--steps", "1600"]
+            + ["--eval-freq", "800", "--eval-episodes", "2", "--out", str(out), "--threshold", "Pendulum-v1=-2000"]
+            + ["--override", "cmaes:population_size=4"]
         )
     finally:
         torch.set_num_threads(threads)
-    tb = out / "tb" / "Pendulum-v1"
-    assert (tb / "ARS_1").is_dir() and (tb / "PPO_1").is_dir()
-    assert list((tb / "ARS_1").glob("events.out.tfevents.*"))
-    for algo in ("ars", "ppo"):
-        with (out / "runs" / "Pendulum-v1" / algo / "seed0" / "eval.csv").open() as f:
-            rows = list(csv.DictReader(f))
-        assert float(rows[0]["env_steps"]) == 0  # evaluation before training
-        assert float(rows[-1]["env_steps"]) >= 1600  # and at the end
-        assert len(rows) >= 3
-    assert (out / "plots" / "Pendulum-v1.png").stat().st_size > 10_000
+    for algo in ("ars_es", "cmaes"):
+        for seed in (0, 1):
+            folder = out / "logs" / algo / f"Pendulum-v1_1_seed{seed}"
+            evaluations = np.load(folder / "evaluations.npz")
+            assert evaluations["timesteps"][0] == 0 and evaluations["timesteps"][-1] >= 1600  # start and end
+            assert ALGOS[algo].load(folder / "Pendulum-v1.zip").num_timesteps == evaluations["timesteps"][-1]
+    assert (out / "tb" / "Pendulum-v1" / "ARS_ES_1").is_dir() and (out / "tb" / "Pendulum-v1" / "CMAES_2").is_dir()
+    assert (out / "plots" / "Pendulum-v1-wallclock.png").stat().st_size > 10_000
     text = report.read_text()
-    assert "| ARS | 1 (0) |" in text and "| PPO | 1 (0) |" in text
-    assert "time to return ≥ -2000" in text
-    assert (out / "configs" / "ppo-Pendulum-v1.yml").is_file()
-    # the report can be redrawn from the files alone
-    assert compare.main(["--out", str(out), "--report-only"]).is_file()
+    assert "| ars_es (ARS) | 2 (0, 1) | 1,600 |" in text and "time to return ≥ -2000" in text
+    assert compare.main(["--out", str(out), "--report-only"]).is_file()  # redrawn from the files alone
+    # rl-zoo's plots read the runs: learning curves, results table, rliable's IQM and bootstrap intervals
+    pytest.importorskip("rliable")
+    capsys.readouterr()
+    pickle = tmp_path / "all_plots"
+    zoo(
+        "all_plots",
+        "-a",
+        "ars_es",
+        "cmaes",
+        "-e",
+        "Pendulum-v1",
+        "-f",
+        str(out / "logs"),
+        "--no-display",
+        "-o",
+        str(pickle),
+    )
+    table = capsys.readouterr().out
+    assert "ARS_ES" in table and "CMAES" in table and "0.0 +/- 0.0" not in table
+    figure = tmp_path / "iqm.png"
+    zoo("plot_from_file", "-i", f"{pickle}.pkl", "--rliable", "--iqm", "-o", str(figure), "--format", "png")
+    assert "Computing bootstrap CI" in capsys.readouterr().out and figure.stat().st_size > 10_000
 
 
-def test_render_gif(trained_ars: Path, tmp_path: Path) -> None:
+@pytest.mark.parametrize("key", [key for key in KEYS if issubclass(ALGOS[key], PopulationAlgorithm)])
+def test_budget_overshoot_is_at_most_one_generation(key: str) -> None:
+    class Generations(BaseCallback):
+        def __init__(self) -> None:
+            super().__init__()
+            self.starts: list[int] = []
+
+        def _on_rollout_start(self) -> None:
+            self.starts.append(self.num_timesteps)
+
+        def _on_step(self) -> bool:
+            return True
+
+    small = dict(item.split(":") for item in SMALL[key])
+    generations = Generations()
+    model = ALGOS[key]("MlpPolicy", "CartPole-v1", seed=0, **{k: int(v) for k, v in small.items()})
+    model.learn(1000, callback=generations)
+    assert generations.starts[-1] < 1000 <= model.num_timesteps  # the last generation started below the budget
+
+
+def test_render_gif(runs: Path, tmp_path: Path) -> None:
     pytest.importorskip("imageio")
     pytest.importorskip("pygame")
-    model = trained_ars / "logs" / "ars" / "Pendulum-v1_1" / "Pendulum-v1.zip"
+    model = runs / "logs" / "ars_es" / "Pendulum-v1_1" / "Pendulum-v1.zip"
     out = tmp_path / "pendulum.gif"
     proc = run([str(ROOT / "benchmarks" / "render.py"), str(model), "--out", str(out), "--steps", "8"], tmp_path)
     assert "ARS on Pendulum-v1" in proc.stdout  # algorithm and env found from the save and rl-zoo's files
     import imageio.v3 as iio
 
     assert iio.imread(out).shape[0] == 9  # first frame + one per step
+
+
+# ----------------------------------------------------------------------------------------------- docs
+def test_docs_walk_through_the_workflow() -> None:
+    guide = (ROOT / "docs" / "guide" / "zoo.md").read_text()
+    for command in ("train", "enjoy", "record_video", "record_training", "push_to_hub", "load_from_hub", "-optimize"):
+        assert command in guide
+    assert "all_plots" in guide and "plot_from_file" in guide
+    # which curve to hold against PPO
+    assert "`rollout/ep_rew_mean` averages the perturbed candidates" in guide
+    assert "`eval/mean_reward`" in guide

@@ -10,6 +10,7 @@ from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
 
 from sb3_es.ars.policies import FlatPolicy, LinearPolicy, MlpPolicy
+from sb3_es.common.base_class import constant_value
 from sb3_es.common.population_algorithm import (
     PopulationAlgorithm,
     check_positive,
@@ -67,6 +68,7 @@ class ARS(PopulationAlgorithm):
     }
     strategy: ARSStrategy
     scheduled_hyperparameters = ("learning_rate", "delta_std")
+    strategy_hyperparameters = ("n_delta", "n_top")
 
     def __init__(
         self,
@@ -97,6 +99,7 @@ class ARS(PopulationAlgorithm):
         n_top = n_delta if n_top is None else n_top
         if int(n_top) != n_top or not 1 <= n_top <= n_delta:
             raise ValueError(f"n_top={n_top} must be an integer between 1 and n_delta={n_delta}.")
+        delta_std = constant_value(delta_std)
         check_positive("delta_std", delta_std)
         super().__init__(
             policy,
@@ -141,7 +144,7 @@ class ARS(PopulationAlgorithm):
         total_timesteps: int,
         callback: MaybeCallback = None,
         log_interval: int = 1,
-        tb_log_name: str = "ARS",
+        tb_log_name: str = "ARS_ES",
         reset_num_timesteps: bool = True,
         progress_bar: bool = False,
     ) -> SelfARS:

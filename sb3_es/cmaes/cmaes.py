@@ -58,6 +58,7 @@ class CMAES(PopulationAlgorithm):
 
     #: Above this many parameters, ``diagonal="auto"`` picks separable CMA-ES.
     DIAGONAL_THRESHOLD: ClassVar[int] = 1000
+    strategy_hyperparameters = ("max_restarts",)
     strategy: CMAESStrategy
 
     def __init__(

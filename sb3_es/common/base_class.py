@@ -3,10 +3,11 @@ episodes that end and SB3's on-policy logging."""
 
 from __future__ import annotations
 
+import inspect
 import io
 import pathlib
 import warnings
-from typing import Any, TypeVar
+from typing import Any, ClassVar, TypeVar
 
 import gymnasium as gym
 import torch as th
@@ -16,6 +17,7 @@ from stable_baselines3.common.env_util import is_wrapped
 from stable_baselines3.common.on_policy_algorithm import OnPolicyAlgorithm
 from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, Schedule, TensorDict
+from stable_baselines3.common.utils import ConstantSchedule
 
 from sb3_es.common.checks import check_seed
 from sb3_es.common.save_util import check_save_file
@@ -26,6 +28,22 @@ from sb3_es.evaluation.time_limit import env_time_limit
 DEFAULT_MAX_EPISODE_STEPS = 1000
 
 SelfESBaseAlgorithm = TypeVar("SelfESBaseAlgorithm", bound="ESBaseAlgorithm")
+
+
+def constant_value(value: Any) -> Any:
+    """
+    A ``ConstantSchedule`` as its number (rl-zoo wraps a number given for ``learning_rate`` or ``delta_std`` in one);
+    any other value unchanged. A number and a constant schedule differ where an algorithm decays a number (OpenES).
+
+    :param value: A hyperparameter value.
+    :return: The number of a constant schedule, or ``value``.
+    """
+    return value.val if isinstance(value, ConstantSchedule) else value
+
+
+def _frozen(value: Any) -> Any:
+    """:return: ``value`` with lists as tuples, to compare a value given to ``load()`` with the saved one."""
+    return tuple(_frozen(v) for v in value) if isinstance(value, (list, tuple)) else value
 
 
 class ESBaseAlgorithm(BaseAlgorithm):
@@ -42,6 +60,10 @@ class ESBaseAlgorithm(BaseAlgorithm):
     - ``dump_logs`` is SB3's ``OnPolicyAlgorithm.dump_logs`` (``rollout/`` and ``time/`` keys).
     - Every episode ends, so that ``learn()`` returns: an env given by its id that has no time limit is wrapped in
       gymnasium's ``TimeLimit``, and the evaluation cuts any episode at :meth:`episode_step_limit` steps.
+    - A hyperparameter given to ``load()`` (also rl-zoo's ``train -i model.zip -params``) with a new value is
+      applied to the loaded model (:meth:`_apply_hyperparameters`) when the algorithm can change it in mid-run
+      (:attr:`_live_hyperparameters`, and for the population methods their scheduled and strategy-held ones);
+      any other new value, and a name the algorithm does not have, is refused with a ``ValueError``.
 
     :param policy: Policy class or alias.
     :param env: Environment, env id or VecEnv.
@@ -50,12 +72,25 @@ class ESBaseAlgorithm(BaseAlgorithm):
     :param stats_window_size: Episodes averaged in ``rollout/ep_rew_mean``.
     :param tensorboard_log: TensorBoard log directory.
     :param verbose: Verbosity.
-    :param device: Torch device.
+    :param device: Torch device (``"auto"``: see :attr:`_auto_device`).
     :param seed: Random seed.
     :param max_episode_steps: Longest episode, in env steps, that training runs: an episode that reaches it is
         truncated (as by a ``TimeLimit``). ``None``: the env's own ``TimeLimit``, or, for an env without one,
         ``DEFAULT_MAX_EPISODE_STEPS`` (1000) with a warning at ``learn()``.
     """
+
+    #: Constructor arguments that ``load()`` may change by setting the attribute alone: read at every update, or
+    #: by SB3 itself (``seed`` seeds the global generators, as in SB3; the saved random streams continue).
+    _live_hyperparameters: ClassVar[tuple[str, ...]] = (
+        "tensorboard_log",
+        "verbose",
+        "seed",
+        "device",
+        "policy_kwargs",  # SB3's load() refuses a different value itself
+        "max_episode_steps",
+    )
+    #: What ``device="auto"`` means for this algorithm (SB3: CUDA when available).
+    _auto_device: ClassVar[str] = "auto"
 
     def __init__(
         self,
@@ -88,12 +123,12 @@ class ESBaseAlgorithm(BaseAlgorithm):
         super().__init__(
             policy,
             env,
-            learning_rate=learning_rate,  # type: ignore[arg-type]  # None: the algorithm has no learning rate
+            learning_rate=constant_value(learning_rate),  # type: ignore[arg-type]  # None: it has none
             policy_kwargs=policy_kwargs,
             stats_window_size=stats_window_size,
             tensorboard_log=tensorboard_log,
             verbose=verbose,
-            device=device,
+            device=self._auto_device if isinstance(device, str) and device == "auto" else device,
             support_multi_env=True,
             seed=seed,
         )
@@ -191,7 +226,8 @@ class ESBaseAlgorithm(BaseAlgorithm):
         """
         Load a model saved by ``save()``, with everything needed to continue training where it stopped.
 
-        Raises ``ValueError`` for a corrupt file or one saved by another algorithm.
+        Raises ``ValueError`` for a corrupt file, one saved by another algorithm, a hyperparameter in ``kwargs``
+        that the algorithm does not have, or a new value that it cannot apply to a model that has trained.
 
         :param path: Path or file-like object of the zip archive.
         :param env: Environment to continue training on (optional for ``predict()``).
@@ -199,9 +235,61 @@ class ESBaseAlgorithm(BaseAlgorithm):
         :param custom_objects: Objects replacing saved ones, as in SB3.
         :param print_system_info: Print the system info of the save and of this machine.
         :param force_reset: Reset the env before training.
-        :param kwargs: Attributes to override.
+        :param kwargs: Hyperparameters to change (constructor arguments or saved attributes); a new value is used
+            from the next update on.
         :return: The loaded model.
         """
         data, _ = check_save_file(path, cls.__name__, custom_objects)
         cls._check_save_data(path, data)
-        return super().load(path, env, device, custom_objects, print_system_info, force_reset, **kwargs)
+        kwargs = {key: constant_value(value) for key, value in kwargs.items()}
+        changed = cls._changed_hyperparameters(data, kwargs)
+        if isinstance(device, str) and device == "auto":
+            device = cls._auto_device
+        model = super().load(path, env, device, custom_objects, print_system_info, force_reset, **kwargs)
+        model._apply_hyperparameters(changed)
+        return model
+
+    @classmethod
+    def _applicable_on_load(cls) -> set[str]:
+        """:return: The constructor arguments that ``load()`` can give a new value."""
+        return set(cls._live_hyperparameters)
+
+    @classmethod
+    def _changed_hyperparameters(cls, data: dict[str, Any], kwargs: dict[str, Any]) -> dict[str, Any]:
+        """
+        The constructor arguments given to ``load()`` with a value other than the saved one; refuse unknown names
+        and new values that the algorithm cannot apply.
+
+        :param data: The save's data dictionary.
+        :param kwargs: The keyword arguments given to ``load()``.
+        :return: ``name -> new value``.
+        """
+        parameters = set(inspect.signature(cls.__init__).parameters) - {"self", "policy", "env", "_init_setup_model"}
+        unknown = sorted(set(kwargs) - parameters - set(data))
+        if unknown:
+            raise ValueError(
+                f"{cls.__name__}.load() got {', '.join(unknown)}, which {cls.__name__} does not have (its "
+                f"hyperparameters: {', '.join(sorted(parameters))}). Check the spelling."
+            )
+        changed = {
+            key: value
+            for key, value in kwargs.items()
+            if key in parameters and (key not in data or _frozen(value) != _frozen(data[key]))
+        }
+        for key, value in changed.items():
+            if key not in cls._applicable_on_load():
+                raise ValueError(
+                    f"{cls.__name__}.load({key}={value!r}): the saved model has {key}={data.get(key)!r}, and "
+                    f"{cls.__name__} cannot change {key} once it has trained (the saved state was built with it). "
+                    f"Leave {key} out of load() (with rl-zoo's train -i: out of -params and the hyperparameter "
+                    "file's entry), or train a new model."
+                )
+        return changed
+
+    def _apply_hyperparameters(self, changed: dict[str, Any]) -> None:
+        """
+        Apply to the loaded model the hyperparameters that ``load()`` changed (SB3's ``load()`` has set the
+        attributes and rebuilt ``lr_schedule``; override to hand them to state built from them).
+
+        :param changed: ``name -> new value``.
+        """

@@ -83,7 +83,8 @@ class PopulationAlgorithm(ESBaseAlgorithm):
     :param tensorboard_log: TensorBoard log directory.
     :param seed: Seed for the strategy, the environments and torch.
     :param verbose: 0 none, 1 training information, 2 debug.
-    :param device: Torch device; the CPU is the right choice for small policies.
+    :param device: Torch device; the CPU is the right choice for small policies, and what ``"auto"`` means here
+        (rl-zoo passes ``"auto"``): the candidates' forward passes are NumPy.
     :param max_episode_steps: Longest episode training runs (see :class:`~sb3_es.common.base_class.ESBaseAlgorithm`):
         ``None`` takes the env's ``TimeLimit``, or 1000 steps with a warning for an env without one.
     :param evaluator: Who runs the candidates: ``"local"`` (the model's VecEnv, in this process),
@@ -101,6 +102,18 @@ class PopulationAlgorithm(ESBaseAlgorithm):
     #: built with the starting value; a schedule is then evaluated, checked and written into the strategy at
     #: the start of every generation (the one place where anything outside a strategy changes it).
     scheduled_hyperparameters: ClassVar[tuple[str, ...]] = ()
+    #: Hyperparameters the strategy keeps under the same name and that ``load()`` may change: the strategy checks
+    #: the new values (``Strategy.check_settings``) and uses them from the next generation on.
+    strategy_hyperparameters: ClassVar[tuple[str, ...]] = ()
+    _live_hyperparameters: ClassVar[tuple[str, ...]] = (
+        *ESBaseAlgorithm._live_hyperparameters,
+        "n_eval_episodes",
+        "alive_bonus_offset",
+        "reward_clip",
+        "terminal_reward",
+        "evaluator",
+    )
+    _auto_device: ClassVar[str] = "cpu"
     policy_aliases: ClassVar[dict[str, type[BasePolicy]]] = {
         "MlpPolicy": MlpPolicy,
         "LinearPolicy": LinearPolicy,
@@ -199,6 +212,29 @@ class PopulationAlgorithm(ESBaseAlgorithm):
             if not callable(value):
                 setattr(self.strategy, name, float(value))
 
+    @classmethod
+    def _applicable_on_load(cls) -> set[str]:
+        return super()._applicable_on_load() | set(cls.scheduled_hyperparameters) | set(cls.strategy_hyperparameters)
+
+    def _apply_hyperparameters(self, changed: dict[str, Any]) -> None:
+        """
+        Hand the loaded strategy the hyperparameters that ``load()`` changed: a number for a scheduled one (a
+        schedule is written into it at every generation anyway) and the strategy-held ones; the strategy checks
+        them. The others (:attr:`_live_hyperparameters`) are read from the model at every generation.
+
+        :param changed: ``name -> new value``.
+        """
+        assert self.strategy is not None
+        shaping = self.reward_shaping  # checks reward_clip, terminal_reward and alive_bonus_offset
+        self.reward_clip, self.terminal_reward = shaping.reward_clip, shaping.terminal_reward
+        for name, value in changed.items():
+            if name in self.scheduled_hyperparameters and not callable(value):
+                check_positive(name, value)
+                setattr(self.strategy, name, float(value))
+            elif name in self.strategy_hyperparameters:
+                setattr(self.strategy, name, value)
+        self.strategy.check_settings()
+
     def _ask(self) -> Population:
         """
         Write this generation's value of every scheduled hyperparameter into the strategy, then ask it.
@@ -281,7 +317,8 @@ class PopulationAlgorithm(ESBaseAlgorithm):
         :param total_timesteps: Env steps to train for.
         :param callback: Callback(s) called at every vec step; returning False stops training at once
             (the interrupted generation is discarded, the parameters stay those of the last update).
-        :param log_interval: Number of generations between two log dumps.
+        :param log_interval: Number of generations between two log dumps (and one at the end for the generations
+            since the last dump); ``None``: no dumps.
         :param tb_log_name: Name of the TensorBoard run.
         :param reset_num_timesteps: Whether to reset ``num_timesteps`` (False to continue a run).
         :param progress_bar: Display a progress bar (tqdm and rich).
@@ -295,6 +332,7 @@ class PopulationAlgorithm(ESBaseAlgorithm):
         self._stop_training = False
         if self.verbose >= 1:
             print(self._generation_size_message(total_timesteps))
+        dumped = self._n_updates
         while self.num_timesteps < total_timesteps and not self._stop_training:
             self._update_current_progress_remaining(self.num_timesteps, total_timesteps)
             if not self._run_generation(evaluator, callback):
@@ -302,6 +340,9 @@ class PopulationAlgorithm(ESBaseAlgorithm):
             self._n_updates += 1
             if log_interval is not None and self._n_updates % log_interval == 0:
                 self.dump_logs(self._n_updates)
+                dumped = self._n_updates
+        if log_interval is not None and self._n_updates > dumped:  # a run shorter than log_interval still logs
+            self.dump_logs(self._n_updates)
         callback.on_training_end()
         return self
 

@@ -8,6 +8,7 @@ import numpy as np
 import torch as th
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
 
+from sb3_es.common.base_class import constant_value
 from sb3_es.common.checks import check_non_negative
 from sb3_es.common.population_algorithm import (
     PopulationAlgorithm,
@@ -74,6 +75,17 @@ class OpenES(PopulationAlgorithm):
 
     strategy: OpenESStrategy
     scheduled_hyperparameters = ("learning_rate", "sigma")
+    strategy_hyperparameters = (
+        "population_size",
+        "antithetic",
+        "fitness_shaping",
+        "weight_decay",
+        "forget_best",
+        "sigma_decay",
+        "sigma_limit",
+        "learning_rate_decay",
+        "learning_rate_limit",
+    )
     max_speed: float | None = None  # class default for files saved before ClipUp existed
 
     def __init__(
@@ -110,6 +122,8 @@ class OpenES(PopulationAlgorithm):
         max_episode_steps: int | None = None,
         _init_setup_model: bool = True,
     ) -> None:
+        # rl-zoo passes a number from a hyperparameter file as a constant schedule: a number, which the decay applies to
+        learning_rate = constant_value(learning_rate)
         check_positive("sigma", sigma)
         for name, limit in (("sigma_limit", sigma_limit), ("learning_rate_limit", learning_rate_limit)):
             check_non_negative(name, limit)

@@ -59,6 +59,7 @@ class PGPE(PopulationAlgorithm):
     """
 
     strategy: PGPEStrategy
+    strategy_hyperparameters = ("population_size", "stdev_learning_rate", "stdev_max_change", "fitness_shaping")
     #: ClipUp's max speed when ``max_speed`` is not given (pgpelib's CartPole example; the center learning rate
     #: is then 0.075).
     DEFAULT_MAX_SPEED: ClassVar[float] = 0.15

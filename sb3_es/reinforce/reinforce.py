@@ -123,6 +123,15 @@ class REINFORCE(ESBaseAlgorithm):
         "MultiInputPolicy": MultiInputPolicy,
     }
     policy: DiscretizedPolicy
+    _live_hyperparameters: ClassVar[tuple[str, ...]] = (
+        *ESBaseAlgorithm._live_hyperparameters,
+        "learning_rate",  # SB3's load() rebuilds lr_schedule; the optimizer takes it at every update
+        "n_episodes",
+        "gamma",
+        "normalize_returns",
+        "ent_coef",
+        "max_grad_norm",
+    )
 
     def __init__(
         self,

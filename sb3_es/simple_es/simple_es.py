@@ -60,6 +60,7 @@ class SimpleES(PopulationAlgorithm):
 
     strategy: SimpleESStrategy
     scheduled_hyperparameters = ("sigma",)
+    strategy_hyperparameters = ("population_size",)
 
     def __init__(
         self,

@@ -39,18 +39,21 @@ class ARSStrategy(Strategy):
     ) -> None:
         super().__init__(center, seed)
         self.noise_table = noise_table
-        if n_delta < 1:
-            raise ValueError(f"n_delta={n_delta}: it must be a positive integer.")
-        if not 1 <= n_top <= n_delta:
-            raise ValueError(f"n_top={n_top} must be between 1 and n_delta={n_delta}.")
         self.n_delta = n_delta
         self.n_top = n_top
-        for name, value in (("delta_std", delta_std), ("learning_rate", learning_rate)):
-            if not (np.isfinite(value) and value > 0):
-                raise ValueError(f"{name}={value}: it must be a positive number.")
         self.delta_std = float(delta_std)
         self.learning_rate = float(learning_rate)
+        self.check_settings()
         self._deltas: np.ndarray | None = None
+
+    def check_settings(self) -> None:
+        if int(self.n_delta) != self.n_delta or self.n_delta < 1:
+            raise ValueError(f"n_delta={self.n_delta}: it must be a positive integer.")
+        if int(self.n_top) != self.n_top or not 1 <= self.n_top <= self.n_delta:
+            raise ValueError(f"n_top={self.n_top} must be between 1 and n_delta={self.n_delta}.")
+        for name, value in (("delta_std", self.delta_std), ("learning_rate", self.learning_rate)):
+            if not (np.isfinite(value) and value > 0):
+                raise ValueError(f"{name}={value}: it must be a positive number.")
 
     @property
     def population_size(self) -> int:

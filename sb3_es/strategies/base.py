@@ -91,6 +91,12 @@ class Strategy(ABC):
         :return: Scalars worth logging.
         """
 
+    def check_settings(self) -> None:  # noqa: B027  (optional hook: most strategies have settings to check)
+        """
+        Raise a clear ``ValueError`` for settings (attributes such as ``population_size``) that the strategy cannot
+        use; called when it is built and when a loaded model is given new hyperparameters. None to check here.
+        """
+
     def set_center(self, center: np.ndarray) -> None:
         """
         Move the center, e.g. after ``set_parameters()`` wrote new weights into the policy.

@@ -78,18 +78,6 @@ class OpenESStrategy(GradientStrategy):
     ) -> None:
         super().__init__(center, learning_rate, optimizer, momentum, betas, max_speed, seed)
         self.noise_table = noise_table
-        if population_size < 2 or (antithetic and population_size % 2):
-            raise ValueError(
-                f"population_size={population_size}: it must be at least 2, and even with antithetic sampling."
-            )
-        if not (np.isfinite(sigma) and sigma > 0):
-            raise ValueError(f"sigma={sigma}: it must be a positive number.")
-        if weight_decay < 0:
-            raise ValueError(f"weight_decay={weight_decay}: it must be >= 0.")
-        for name, rate in (("sigma_decay", sigma_decay), ("learning_rate_decay", learning_rate_decay)):
-            if not 0 < rate <= 1:
-                raise ValueError(f"{name}={rate}: it must be in (0, 1].")
-        shape_fitness(np.zeros(2), fitness_shaping)  # validates the name
         self.population_size = population_size
         self.sigma = float(sigma)
         self.antithetic = antithetic
@@ -98,7 +86,24 @@ class OpenESStrategy(GradientStrategy):
         self.forget_best = forget_best
         self.sigma_decay, self.sigma_limit = sigma_decay, sigma_limit
         self.learning_rate_decay, self.learning_rate_limit = learning_rate_decay, learning_rate_limit
+        self.check_settings()
         self._noise: np.ndarray | None = None
+
+    def check_settings(self) -> None:
+        population_size = self.population_size
+        if int(population_size) != population_size or population_size < 2 or (self.antithetic and population_size % 2):
+            raise ValueError(
+                f"population_size={population_size}: it must be at least 2, and even with antithetic sampling."
+            )
+        for name, value in (("sigma", self.sigma), ("learning_rate", self.learning_rate)):
+            if not (np.isfinite(value) and value > 0):
+                raise ValueError(f"{name}={value}: it must be a positive number.")
+        if self.weight_decay < 0:
+            raise ValueError(f"weight_decay={self.weight_decay}: it must be >= 0.")
+        for name, rate in (("sigma_decay", self.sigma_decay), ("learning_rate_decay", self.learning_rate_decay)):
+            if not 0 < rate <= 1:
+                raise ValueError(f"{name}={rate}: it must be in (0, 1].")
+        shape_fitness(np.zeros(2), self.fitness_shaping)  # validates the name
 
     def _ask(self) -> Population:
         half = self.population_size // 2 if self.antithetic else self.population_size

@@ -54,24 +54,28 @@ class PGPEStrategy(GradientStrategy):
         seed: int | np.random.SeedSequence | None = None,
     ) -> None:
         super().__init__(center, center_learning_rate, optimizer, momentum, betas, max_speed, seed)
-        if population_size < 2 or population_size % 2:
-            raise ValueError(f"population_size={population_size}: it must be even (symmetric pairs) and at least 2.")
+        self.population_size = population_size
         if not (np.isfinite(stdev_init) and stdev_init > 0):
             raise ValueError(f"stdev_init={stdev_init}: it must be a positive number.")
-        if not stdev_learning_rate >= 0:
-            raise ValueError(f"stdev_learning_rate={stdev_learning_rate}: it must be >= 0 (0 keeps stdev fixed).")
-        if not 0 < stdev_max_change < 1:
-            raise ValueError(
-                f"stdev_max_change={stdev_max_change}: it must be in (0, 1) (a relative change; 0.2 in the ClipUp "
-                "paper), so that every standard deviation stays positive."
-            )
-        shape_fitness(np.zeros(2), fitness_shaping)  # validates the name
-        self.population_size = population_size
         self.stdev = np.full(self.num_params, float(stdev_init))
         self.stdev_learning_rate = float(stdev_learning_rate)
         self.stdev_max_change = float(stdev_max_change)
         self.fitness_shaping = fitness_shaping
+        self.check_settings()
         self._scaled_noise: np.ndarray | None = None
+
+    def check_settings(self) -> None:
+        population_size = self.population_size
+        if int(population_size) != population_size or population_size < 2 or population_size % 2:
+            raise ValueError(f"population_size={population_size}: it must be even (symmetric pairs) and at least 2.")
+        if not self.stdev_learning_rate >= 0:
+            raise ValueError(f"stdev_learning_rate={self.stdev_learning_rate}: it must be >= 0 (0 keeps stdev fixed).")
+        if not 0 < self.stdev_max_change < 1:
+            raise ValueError(
+                f"stdev_max_change={self.stdev_max_change}: it must be in (0, 1) (a relative change; 0.2 in the "
+                "ClipUp paper), so that every standard deviation stays positive."
+            )
+        shape_fitness(np.zeros(2), self.fitness_shaping)  # validates the name
 
     @property
     def center_learning_rate(self) -> float:

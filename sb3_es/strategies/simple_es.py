@@ -69,18 +69,21 @@ class SimpleESStrategy(Strategy):
         noise_table: SharedNoiseTable | None = None,
     ) -> None:
         super().__init__(center, seed)
-        if population_size < 2:
-            raise ValueError(f"population_size={population_size}: it must be at least 2.")
-        if not 1 <= n_elite <= population_size:
-            raise ValueError(f"n_elite={n_elite} must be between 1 and population_size={population_size}.")
-        if not (np.isfinite(sigma) and sigma > 0):
-            raise ValueError(f"sigma={sigma}: it must be a positive number.")
         self.population_size = population_size
         self.sigma = float(sigma)
         self.n_elite = n_elite
+        self.check_settings()
         self.weights: EliteWeights = weights
         self.elite_weights = elite_weights(n_elite, weights)
         self.noise_table = noise_table
+
+    def check_settings(self) -> None:
+        if int(self.population_size) != self.population_size or self.population_size < 2:
+            raise ValueError(f"population_size={self.population_size}: it must be at least 2.")
+        if not 1 <= self.n_elite <= self.population_size:
+            raise ValueError(f"n_elite={self.n_elite} must be between 1 and population_size={self.population_size}.")
+        if not (np.isfinite(self.sigma) and self.sigma > 0):
+            raise ValueError(f"sigma={self.sigma}: it must be a positive number.")
 
     def _ask(self) -> Population:
         if self.noise_table is None:

@@ -1,0 +1,217 @@
+"""``python -m sb3_es.zoo <command> [rl-zoo arguments]``: rl-zoo's scripts with the sb3-es algorithms registered."""
+
+from __future__ import annotations
+
+import contextlib
+import importlib
+import os
+import runpy
+import shlex
+import shutil
+import sys
+import tempfile
+import warnings
+from collections.abc import Iterator, Sequence
+from pathlib import Path
+
+from sb3_es.zoo.registry import (
+    ALGOS,
+    UsageError,
+    check_algo,
+    config_entry,
+    default_conf_file,
+    is_sb3_es_algo,
+    register,
+)
+
+#: rl-zoo's scripts by command, with rl-zoo's own arguments: ``module:function`` is called, a module without a
+#: function (rl-zoo keeps those scripts in the module's ``if __name__ == "__main__"`` block) is run as ``__main__``.
+SCRIPTS: dict[str, str] = {
+    "train": "rl_zoo3.train:train",
+    "enjoy": "rl_zoo3.enjoy:enjoy",
+    "record_video": "rl_zoo3.record_video",
+    "record_training": "rl_zoo3.record_training",
+    "push_to_hub": "rl_zoo3.push_to_hub",
+    "load_from_hub": "rl_zoo3.load_from_hub",
+    "plot_train": "rl_zoo3.plots:plot_train",
+    "all_plots": "rl_zoo3.plots:all_plots",
+    "plot_from_file": "rl_zoo3.plots:plot_from_file",
+}
+#: Commands that load one algorithm by ``--algo`` (the plots read folders only).
+ALGO_COMMANDS = ("train", "enjoy", "record_video", "record_training", "push_to_hub", "load_from_hub")
+#: Commands whose ``-f/--folder`` defaults to rl-zoo's pretrained agents (``rl-trained-agents``, none of them
+#: sb3-es's): for sb3-es algorithms the default is ``logs``, where ``train`` writes.
+LOGS_DEFAULT_COMMANDS = ("enjoy", "record_video", "record_training")
+
+USAGE = f"""usage: python -m sb3_es.zoo COMMAND [rl-zoo arguments]   (or: sb3-es COMMAND ...)
+
+COMMAND is one of rl-zoo's scripts, run with rl-zoo's own flags: {", ".join(SCRIPTS)}.
+The sb3-es algorithms have keys of their own: --algo {", ".join(ALGOS)} (rl-zoo's ars is
+sb3-contrib's ARS). For them, train reads the packaged sb3_es/hyperparams/<algo>.yml unless --conf-file is
+given, and enjoy, record_video and record_training look in -f logs unless told otherwise.
+
+examples:
+  python -m sb3_es.zoo train --algo ars_es --env Pendulum-v1 -tb runs
+  python -m sb3_es.zoo train --algo openes --env Pendulum-v1 -optimize --n-trials 20 -n 50000
+  python -m sb3_es.zoo enjoy --algo ars_es --env Pendulum-v1
+  python -m sb3_es.zoo all_plots -a ars_es ppo -e Pendulum-v1 -f logs
+"""
+
+
+def _option_value(args: Sequence[str], names: Sequence[str], default: str) -> str:
+    """
+    Value of an option in an argument list (``--name value`` or ``--name=value``), the last one winning.
+
+    :param args: Command-line arguments.
+    :param names: The option's spellings, e.g. ``("--algo",)``.
+    :param default: Value when absent.
+    :return: The value.
+    """
+    value = default
+    for i, arg in enumerate(args):
+        flag, sep, inline = arg.partition("=")
+        if flag in names:
+            if sep:
+                value = inline
+            elif i + 1 < len(args):
+                value = args[i + 1]
+    return value
+
+
+def _has_option(args: Sequence[str], short: str, long: str) -> bool:
+    """
+    Whether an option is present, including argparse's unambiguous abbreviations of the long form.
+
+    :param args: Command-line arguments.
+    :param short: Short form (e.g. ``"-conf"``).
+    :param long: Long form (e.g. ``"--conf-file"``).
+    :return: True if given.
+    """
+    for arg in args:
+        flag = arg.split("=", 1)[0]
+        if flag == short or (flag.startswith("--") and len(flag) > 3 and long.startswith(flag)):
+            return True
+    return False
+
+
+def prepare_args(command: str, args: Sequence[str]) -> list[str]:
+    """
+    Check ``--algo`` and add the sb3-es defaults to rl-zoo's arguments, saying so.
+
+    For an sb3-es algorithm: ``train`` gets ``--conf-file`` (the packaged file) and a line naming the entry it
+    uses, or saying that the env has none and ``default`` is used; ``enjoy``, ``record_video`` and
+    ``record_training`` get ``-f logs``. Arguments for other algorithms are returned unchanged.
+
+    :param command: A key of :data:`SCRIPTS`.
+    :param args: rl-zoo arguments (after the command).
+    :return: The arguments to give rl-zoo.
+    """
+    args = list(args)
+    if command not in ALGO_COMMANDS:
+        return args
+    algo = _option_value(args, ("--algo",), "ppo")
+    check_algo(algo)
+    if not is_sb3_es_algo(algo):
+        return args
+    if command == "train":
+        if not _has_option(args, "-conf", "--conf-file"):
+            args += ["--conf-file", str(default_conf_file(algo))]
+        conf = _option_value(args, ("-conf", "--conf-file"), "")
+        env_id = _option_value(args, ("--env",), "CartPole-v1")
+        if conf.endswith((".yml", ".yaml")) and Path(conf).is_file():
+            key, entry = config_entry(conf, env_id)
+            if key == "default":
+                print(
+                    f"sb3-es: {conf} has no {env_id} entry: {algo} trains with its 'default' entry "
+                    f"({', '.join(f'{k}={v}' for k, v in entry.items())}), not tuned for {env_id}. Add an "
+                    f"{env_id} entry to a copy of the file (--conf-file) or override values with -params key:value."
+                )
+            elif key is not None:
+                print(f"sb3-es: {algo} on {env_id}: hyperparameters from the {env_id} entry of {conf}")
+    if command in LOGS_DEFAULT_COMMANDS and not _has_option(args, "-f", "--folder"):
+        args += ["-f", "logs"]
+    return args
+
+
+@contextlib.contextmanager
+def _argv(argv: list[str]) -> Iterator[None]:
+    """
+    Give rl-zoo's script its arguments: rl-zoo's scripts read ``sys.argv`` (as ``python -m rl_zoo3.cli`` does).
+
+    :param argv: The full ``sys.argv`` for the script.
+    """
+    saved = sys.argv
+    sys.argv = argv
+    try:
+        yield
+    finally:
+        sys.argv = saved
+
+
+@contextlib.contextmanager
+def _subprocess_path() -> Iterator[None]:
+    """
+    rl-zoo's ``record_training`` runs ``python -m rl_zoo3.record_video`` and ``ffmpeg`` by name, in new processes.
+    Put first on ``PATH`` a ``python`` that runs that module through this entry point (this interpreter, the
+    sb3-es keys registered) and, when no ``ffmpeg`` is installed, imageio-ffmpeg's binary (``[zoo]`` extra).
+    """
+    with tempfile.TemporaryDirectory(prefix="sb3_es_zoo_") as folder:
+        python = shlex.quote(sys.executable)
+        shim = Path(folder) / "python"
+        shim.write_text(
+            "#!/bin/sh\n"
+            'if [ "$1" = "-m" ] && [ "$2" = "rl_zoo3.record_video" ]; then\n'
+            f'  shift 2; exec {python} -m sb3_es.zoo record_video "$@"\n'
+            "fi\n"
+            f'exec {python} "$@"\n'
+        )
+        shim.chmod(0o755)
+        if shutil.which("ffmpeg") is None:
+            with contextlib.suppress(ImportError, RuntimeError):
+                import imageio_ffmpeg
+
+                os.symlink(imageio_ffmpeg.get_ffmpeg_exe(), Path(folder) / "ffmpeg")
+        saved = os.environ.get("PATH", "")
+        os.environ["PATH"] = folder + os.pathsep + saved
+        try:
+            yield
+        finally:
+            os.environ["PATH"] = saved
+
+
+def run(command: str, args: Sequence[str]) -> None:
+    """
+    Run one of rl-zoo's scripts with the sb3-es algorithms registered and the sb3-es defaults added.
+
+    :param command: A key of :data:`SCRIPTS`.
+    :param args: rl-zoo arguments (after the command).
+    """
+    if command not in SCRIPTS:
+        raise UsageError(f"Unknown command {command!r}: use one of {', '.join(SCRIPTS)}.")
+    register()
+    args = prepare_args(command, args)
+    paths = _subprocess_path() if command == "record_training" else contextlib.nullcontext()
+    module, _, function = SCRIPTS[command].partition(":")
+    with _argv([f"sb3_es.zoo {command}", *args]), paths:
+        if function:
+            getattr(importlib.import_module(module), function)()
+        else:
+            with warnings.catch_warnings():  # rl-zoo imports some of these modules itself; running them is intended
+                warnings.filterwarnings("ignore", "'rl_zoo3.* found in sys.modules", RuntimeWarning)
+                runpy.run_module(module, run_name="__main__", alter_sys=False)
+
+
+def main(argv: Sequence[str] | None = None) -> None:
+    """
+    Entry point: ``python -m sb3_es.zoo COMMAND [rl-zoo arguments]``.
+
+    :param argv: Arguments after the program name (defaults to ``sys.argv[1:]``).
+    """
+    args = list(sys.argv[1:] if argv is None else argv)
+    if not args or args[0] in ("-h", "--help"):
+        print(USAGE)
+        return
+    try:
+        run(args[0], args[1:])
+    except UsageError as e:
+        raise SystemExit(str(e) if args[0] in SCRIPTS else f"{e}\n\n{USAGE}") from e

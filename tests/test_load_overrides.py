@@ -1,0 +1,173 @@
+"""A hyperparameter given to ``load()`` (rl-zoo: ``train -i model.zip -params``) is applied or refused, not dropped."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import pytest
+from stable_baselines3.common.base_class import BaseAlgorithm
+from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.utils import ConstantSchedule
+
+import sb3_es
+from sb3_es import ARS, CMAES, PGPE, REINFORCE, OpenES, SimpleES
+from sb3_es.common.base_class import ESBaseAlgorithm
+
+
+@dataclass
+class Case:
+    """
+    One algorithm's load-time changes.
+
+    :param kwargs: Constructor arguments of the saved model (Pendulum-v1, 2 env slots).
+    :param applied: Values given to ``load()`` that the model must use.
+    :param steps: Env steps of one generation (update) under the ``applied`` values.
+    :param check: Assertions on the model after that generation.
+    :param refused: A value ``load()`` must refuse (it cannot change once training has started).
+    """
+
+    kwargs: dict[str, Any]
+    applied: dict[str, Any]
+    steps: int
+    check: Callable[[Any], None]
+    refused: dict[str, Any] = field(default_factory=dict)
+
+
+def _check_ars(model: ARS) -> None:
+    assert model.strategy.delta_std == 0.05 and model.strategy.n_delta == 2 and model.strategy.n_top == 1
+
+
+def _check_openes(model: OpenES) -> None:
+    assert model.strategy.population_size == 4 and model.strategy.sigma == 0.05
+    assert model.strategy.learning_rate == 0.002
+
+
+def _check_cmaes(model: CMAES) -> None:
+    assert model.strategy.max_restarts == 0 and model.n_eval_episodes == 2
+
+
+def _check_pgpe(model: PGPE) -> None:
+    assert model.strategy.population_size == 4 and model.strategy.stdev_learning_rate == 0.05
+
+
+def _check_simple_es(model: SimpleES) -> None:
+    assert model.strategy.population_size == 4 and model.strategy.sigma == 0.05
+
+
+def _check_reinforce(model: REINFORCE) -> None:
+    assert model.policy.optimizer.param_groups[0]["lr"] == 0.05 and model.n_episodes == 2
+
+
+CASES: dict[type[BaseAlgorithm], Case] = {
+    ARS: Case(
+        dict(n_delta=4, delta_std=0.1),
+        dict(delta_std=0.05, n_delta=2, n_top=1),
+        steps=2 * 2 * 200,
+        check=_check_ars,
+        refused=dict(zero_policy=False),
+    ),
+    OpenES: Case(
+        dict(population_size=8),
+        dict(population_size=4, sigma=0.05, learning_rate=0.002),
+        steps=4 * 200,
+        check=_check_openes,
+        refused=dict(optimizer="sgd"),
+    ),
+    CMAES: Case(
+        dict(population_size=4),
+        dict(max_restarts=0, n_eval_episodes=2),
+        steps=4 * 2 * 200,
+        check=_check_cmaes,
+        refused=dict(sigma=0.5),
+    ),
+    PGPE: Case(
+        dict(population_size=8),
+        dict(population_size=4, stdev_learning_rate=0.05),
+        steps=4 * 200,
+        check=_check_pgpe,
+        refused=dict(stdev_init=0.5),
+    ),
+    SimpleES: Case(
+        dict(population_size=8),
+        dict(population_size=4, sigma=0.05),
+        steps=4 * 200,
+        check=_check_simple_es,
+        refused=dict(n_elite=2),
+    ),
+    REINFORCE: Case(
+        dict(n_episodes=4),
+        dict(learning_rate=0.05, n_episodes=2),
+        steps=2 * 200,
+        check=_check_reinforce,
+        refused=dict(use_baseline=True),
+    ),
+}
+
+
+def saved(cls: type[BaseAlgorithm], folder: Path) -> Path:
+    """A model of ``cls`` trained for one generation on Pendulum-v1 and saved."""
+    env = make_vec_env("Pendulum-v1", n_envs=2, seed=0)
+    model = cls("MlpPolicy", env, seed=0, **CASES[cls].kwargs)
+    model.learn(1)
+    path = folder / f"{cls.__name__}.zip"
+    model.save(path)
+    env.close()
+    return path
+
+
+def test_every_algorithm_has_a_case() -> None:
+    algorithms = {getattr(sb3_es, name) for name in sb3_es.__all__}
+    assert {cls for cls in algorithms if isinstance(cls, type) and issubclass(cls, ESBaseAlgorithm)} == set(CASES)
+
+
+@pytest.mark.parametrize("cls", list(CASES), ids=lambda cls: cls.__name__)
+def test_values_given_to_load_are_applied(cls: type[BaseAlgorithm], tmp_path: Path) -> None:
+    case = CASES[cls]
+    path = saved(cls, tmp_path)
+    env = make_vec_env("Pendulum-v1", n_envs=2, seed=1)
+    model = cls.load(path, env=env, **case.applied)
+    start = model.num_timesteps
+    model.learn(1, reset_num_timesteps=False)
+    assert model.num_timesteps - start == case.steps  # the generation ran with the new values
+    case.check(model)
+    for key, value in case.applied.items():
+        assert getattr(model, key) == value
+
+
+@pytest.mark.parametrize("cls", list(CASES), ids=lambda cls: cls.__name__)
+def test_values_that_cannot_change_are_refused(cls: type[BaseAlgorithm], tmp_path: Path) -> None:
+    path = saved(cls, tmp_path)
+    ((key, value),) = CASES[cls].refused.items()
+    with pytest.raises(ValueError, match=rf"{cls.__name__}.load\({key}=.*cannot change {key} once it has trained"):
+        cls.load(path, **{key: value})
+    model = cls.load(path, **{key: getattr(cls.load(path), key)})  # the saved value itself is fine
+    assert type(model) is cls
+
+
+@pytest.mark.parametrize("cls", list(CASES), ids=lambda cls: cls.__name__)
+def test_unknown_names_are_refused(cls: type[BaseAlgorithm], tmp_path: Path) -> None:
+    path = saved(cls, tmp_path)
+    with pytest.raises(ValueError, match=rf"{cls.__name__}.load\(\) got learning_rat, which .* does not have"):
+        cls.load(path, learning_rat=0.1)
+
+
+def test_ars_n_delta_below_the_saved_n_top_is_refused(tmp_path: Path) -> None:
+    path = saved(ARS, tmp_path)
+    with pytest.raises(ValueError, match=r"n_top=4 must be between 1 and n_delta=2"):
+        ARS.load(path, n_delta=2)
+
+
+def test_rl_zoos_constant_schedules_are_numbers(tmp_path: Path) -> None:
+    # rl-zoo turns learning_rate: 0.05 and delta_std: 0.05 from a file or -params into ConstantSchedule objects
+    model = ARS.load(saved(ARS, tmp_path), delta_std=ConstantSchedule(0.05), learning_rate=ConstantSchedule(0.01))
+    assert model.delta_std == 0.05 and model.learning_rate == 0.01
+    # a number, so that OpenES's learning_rate_decay applies to it
+    openes = OpenES(
+        "MlpPolicy", "Pendulum-v1", population_size=4, learning_rate=ConstantSchedule(0.1), learning_rate_decay=0.5
+    )
+    openes.learn(1600)
+    assert openes.learning_rate == 0.1 and openes._n_updates == 2
+    assert openes.strategy.learning_rate == pytest.approx(0.1 * 0.5**2)
