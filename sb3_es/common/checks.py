@@ -27,20 +27,16 @@ def check_scheduled_value(name: str, value: float, progress_remaining: float, al
     :param name: Hyperparameter name, for the message.
     :param value: The schedule's value now.
     :param progress_remaining: SB3's progress remaining (1 to 0) at which it was evaluated.
-    :param allow_zero: Accept 0 (a learning rate that ends at 0 with the training).
+    :param allow_zero: Accept 0: a step size (learning rate) that ends at 0 with the training makes no update,
+        whereas a noise scale (``sigma``, ``delta_std``) of 0 leaves nothing to explore.
     """
     if not (np.isfinite(value) and (value >= 0 if allow_zero else value > 0)):
-        bound = ">= 0" if allow_zero else "> 0"
+        bound, floor = (">= 0", "0.0") if allow_zero else ("> 0", "1e-6")
+        reason = "a negative step size steps downhill" if allow_zero else f"{name} must stay positive"
         raise ValueError(
             f"The {name} schedule gave {value:.6g} at progress_remaining={progress_remaining:.4g}: it must stay "
-            f"{bound} for all of training (a negative step size steps downhill). Fix the schedule, e.g. clip it: "
-            "lambda progress: max(1e-6, schedule(progress))."
-        )
-    if not allow_zero and not (np.isfinite(value) and value > 0):
-        raise ValueError(
-            f"The {name} schedule gave {value} at progress_remaining={progress_remaining:.4g}: it must stay "
-            f"> 0 for all of training ({name} is the scale of the exploration noise). Fix the schedule, e.g. "
-            "floor it: lambda progress: max(0.01, schedule(progress))."
+            f"{bound} for all of training ({reason}). Fix the schedule, e.g. clip it: "
+            f"lambda progress: max({floor}, schedule(progress))."
         )
 
 

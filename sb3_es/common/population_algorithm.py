@@ -174,7 +174,7 @@ class PopulationAlgorithm(ESBaseAlgorithm):
     # ------------------------------------------------------------------ model
     def _setup_model(self) -> None:
         if self.learning_rate is not None:
-            self._setup_lr_schedule()  # SB3's lr_schedule, checked at every generation (ESBaseAlgorithm)
+            self._setup_lr_schedule()  # SB3's lr_schedule attribute, as in SB3; _ask() applies the schedule
         self.set_random_seed(self.seed)
         policy = self.policy_class(self.observation_space, self.action_space, **self.policy_kwargs)
         if not isinstance(policy, FlatPolicy):
