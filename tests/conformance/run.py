@@ -104,7 +104,7 @@ def main() -> int:
             "-o",
             "timeout_func_only=true",  # time the test, not the formatting of its report
             "-q",
-            "-rfE",
+            "-rfEs",
             *FOLDERS.values(),
             *args.pytest_args,
         ]
