@@ -16,6 +16,7 @@ from gymnasium.wrappers import TimeLimit
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.envs import BitFlippingEnv
 from stable_baselines3.common.evaluation import evaluate_policy
 from stable_baselines3.common.logger import configure
 from stable_baselines3.common.monitor import Monitor
@@ -230,6 +231,17 @@ def test_discrete_observations_are_one_hot_as_in_sb3(name: str) -> None:
     # predict() takes single and batched observations of the space.
     assert policy.predict(samples[0])[0].shape == (2,)
     assert policy.predict(batch)[0].shape == (5, 2)
+
+
+@pytest.mark.parametrize("algo", ALGOS)
+def test_dict_of_multi_binary_observations(algo: str) -> None:
+    """SB3's BitFlippingEnv (a goal env: a Dict of MultiBinary entries) trains and predicts with every algorithm."""
+    env = BitFlippingEnv(n_bits=4)
+    model = make_model(algo, env)
+    model.learn(50)
+    obs, _ = env.reset(seed=0)
+    action, _ = model.predict(obs)
+    assert env.action_space.contains(int(action))
 
 
 @pytest.mark.parametrize("algo", POPULATION_ALGOS)

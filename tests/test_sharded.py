@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from envs import CrashingToyEnv, StepCounter, ToyEnv
+from envs import CrashingToyEnv, NeverEndingEnv, StepCounter, ToyEnv
 from sharded_helpers import (
     ENVS_PER_WORKER,
     ReplayCounter,
@@ -169,6 +169,19 @@ def test_callback_stops_training(toy: ShardedEvaluator) -> None:
     assert model.num_timesteps == 3 * ENVS_PER_WORKER
     assert model._n_updates == 0
     np.testing.assert_array_equal(model.policy.parameters_to_vector(), start)
+
+
+def test_episodes_without_time_limit_are_cut_in_the_workers(host: str) -> None:
+    """A factory without a time limit: the workers cut the episodes at the model's max_episode_steps."""
+    evaluator = make_evaluator(host, NeverEndingEnv, num_workers=1, envs_per_worker=2)
+    model = make_ars(make_vec_env(NeverEndingEnv, n_envs=2), evaluator=evaluator, max_episode_steps=15)
+    counter = ReplayCounter()
+    with evaluator:
+        model.learn(100, callback=counter)
+    assert model.num_timesteps >= 100
+    # Every candidate's episode ended at the cap, in a worker, and the replay showed its done.
+    assert model.ep_info_buffer is not None and {info["l"] for info in model.ep_info_buffer} == {15}
+    assert counter.dones >= 6
 
 
 def test_faults(host: str, tmp_path: Path, caplog: pytest.LogCaptureFixture, monkeypatch: pytest.MonkeyPatch) -> None:

@@ -161,7 +161,7 @@ class ESBaseAlgorithm(BaseAlgorithm):
             self._warned_time_limit = True
             warnings.warn(
                 f"The env has no time limit (gymnasium's TimeLimit): {type(self).__name__} ends its episodes at "
-                f"{cap} steps, so that every candidate's episode ends. Pass max_episode_steps= to choose the "
+                f"{cap} steps, so that every episode of training ends. Pass max_episode_steps= to choose the "
                 "limit (and silence this warning), or register the env with max_episode_steps.",
                 stacklevel=3,
             )

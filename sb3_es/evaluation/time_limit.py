@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
-from gymnasium.wrappers import TimeLimit
 from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
 
 
@@ -16,8 +16,11 @@ def env_time_limit(env: VecEnv) -> int | None:
     :param env: The VecEnv.
     :return: The largest ``max_episode_steps`` over the env slots, or ``None`` if a slot has no ``TimeLimit``.
     """
+    # Looked up at call time: rl_zoo3 replaces gymnasium's TimeLimit with a subclass, and a SubprocVecEnv pickles the
+    # class by name, which fails for a class imported before the replacement.
+    time_limit = gym.wrappers.TimeLimit
     try:
-        wrapped = env.env_is_wrapped(TimeLimit)
+        wrapped = env.env_is_wrapped(time_limit)
     except Exception:  # e.g. a SubprocVecEnv that cannot pickle the class (a re-imported gymnasium): ask the specs
         try:
             limits = [getattr(spec, "max_episode_steps", None) for spec in env.get_attr("spec")]

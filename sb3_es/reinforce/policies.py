@@ -27,11 +27,11 @@ from stable_baselines3.common.distributions import (
     make_proba_distribution,
 )
 from stable_baselines3.common.policies import ActorCriticPolicy
-from stable_baselines3.common.preprocessing import get_flattened_obs_dim
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor, FlattenExtractor
 from stable_baselines3.common.type_aliases import PyTorchObs, Schedule
 from torch import nn
 
+from sb3_es.evaluation.network import flat_obs_dim
 from sb3_es.reinforce.legacy import upgrade_legacy_state_dict
 
 #: Default limit on the number of joint actions (``n_bins ** action_dim``).
@@ -43,21 +43,16 @@ class DictFlattenExtractor(BaseFeaturesExtractor):
     Flatten every entry of a ``Dict`` observation and concatenate them (keys in the space's order).
 
     Unlike SB3's ``CombinedExtractor`` it accepts scalar entries (shape ``()``), such as the ``height``
-    of dm_control's walker exposed through shimmy, and it has no parameters.
+    of dm_control's walker exposed through shimmy, and it has no parameters. ``Discrete``, ``MultiDiscrete``
+    and ``MultiBinary`` entries arrive one-hot encoded (SB3's ``preprocess_obs``, applied by the policy).
 
-    :param observation_space: A ``Dict`` of ``Box`` spaces.
+    :param observation_space: A ``Dict`` of ``Box``, ``Discrete``, ``MultiDiscrete`` or ``MultiBinary`` spaces.
     """
 
     def __init__(self, observation_space: spaces.Dict) -> None:
         if not isinstance(observation_space, spaces.Dict):
             raise ValueError(f"DictFlattenExtractor needs a Dict observation space, got {observation_space}.")
-        bad = {k: type(s).__name__ for k, s in observation_space.spaces.items() if not isinstance(s, spaces.Box)}
-        if bad:
-            raise ValueError(
-                f"Unsupported observation space: Dict entries {bad} are not Box spaces. Wrap the env with "
-                "gymnasium.wrappers.FlattenObservation or pass another features_extractor_class."
-            )
-        super().__init__(observation_space, get_flattened_obs_dim(observation_space))
+        super().__init__(observation_space, flat_obs_dim(observation_space))
         self.keys = list(observation_space.spaces.keys())
 
     def forward(self, observations: dict[str, th.Tensor]) -> th.Tensor:  # type: ignore[override]

@@ -74,7 +74,7 @@ def install_test_requirements(folder: Path) -> Path | None:
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[1] if __doc__ else None)
-    parser.add_argument("--timeout", type=int, default=120, help="seconds allowed per test (pytest-timeout)")
+    parser.add_argument("--timeout", type=int, default=300, help="seconds allowed per test (pytest-timeout)")
     parser.add_argument("--keep", type=Path, help="run in this folder and keep it (default: a temporary folder)")
     parser.add_argument("pytest_args", nargs="*", help="extra pytest arguments (after --)")
     args = parser.parse_args()
@@ -104,7 +104,7 @@ def main() -> int:
             "-o",
             "timeout_func_only=true",  # time the test, not the formatting of its report
             "-q",
-            "-rfE",
+            "-rfEs",
             *FOLDERS.values(),
             *args.pytest_args,
         ]
