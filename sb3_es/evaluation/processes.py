@@ -270,22 +270,23 @@ class ProcessEvaluator(ShardedEvaluator):
         generation_timeout: float | None = None,
         linger: bool = True,
     ) -> None:
-        super().__init__(max_worker_restarts, generation_timeout, linger)
-        self._env_config = env_config(
-            env, envs_per_worker, wrapper_class, env_kwargs, wrapper_kwargs, vec_env_cls, vec_env_kwargs, monitor_kwargs
+        config = env_config(
+            env,
+            envs_per_worker,
+            wrapper_class=wrapper_class,
+            env_kwargs=env_kwargs,
+            wrapper_kwargs=wrapper_kwargs,
+            vec_env_cls=vec_env_cls,
+            vec_env_kwargs=vec_env_kwargs,
+            monitor_kwargs=monitor_kwargs,
         )
-        if num_workers is not None and (int(num_workers) != num_workers or num_workers < 1):
-            raise ValueError(f"num_workers={num_workers}: it must be a positive integer.")
+        super().__init__(config, num_workers, start_timeout, max_worker_restarts, generation_timeout, linger)
         start_method = start_method or default_start_method()
         if start_method not in mp.get_all_start_methods():
             raise ValueError(f"start_method={start_method!r}: use one of {mp.get_all_start_methods()}.")
-        if not start_timeout > 0:
-            raise ValueError(f"start_timeout={start_timeout}: give a positive number of seconds.")
-        self.env = env
-        self.num_workers = usable_cpus() if num_workers is None else int(num_workers)
-        self.envs_per_worker = int(envs_per_worker)
         self.start_method = start_method
-        self.start_timeout = float(start_timeout)
+        #: Number of worker processes.
+        self.num_workers = self._num_workers or usable_cpus()
 
     @property
     def _workers(self) -> list[Any]:

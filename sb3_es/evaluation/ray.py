@@ -263,22 +263,21 @@ class RayEvaluator(ShardedEvaluator):
         generation_timeout: float | None = None,
     ) -> None:
         import_ray()
-        super().__init__(max_actor_restarts, generation_timeout)
-        self._env_config = env_config(
-            env, envs_per_worker, wrapper_class, env_kwargs, wrapper_kwargs, vec_env_cls, vec_env_kwargs, monitor_kwargs
+        config = env_config(
+            env,
+            envs_per_worker,
+            wrapper_class=wrapper_class,
+            env_kwargs=env_kwargs,
+            wrapper_kwargs=wrapper_kwargs,
+            vec_env_cls=vec_env_cls,
+            vec_env_kwargs=vec_env_kwargs,
+            monitor_kwargs=monitor_kwargs,
         )
-        if num_workers is not None and (int(num_workers) != num_workers or num_workers < 1):
-            raise ValueError(f"num_workers={num_workers}: it must be a positive integer.")
+        super().__init__(config, num_workers, start_timeout, max_actor_restarts, generation_timeout)
         if not num_cpus_per_worker > 0:
             raise ValueError(f"num_cpus_per_worker={num_cpus_per_worker}: it must be positive.")
-        if not start_timeout > 0:
-            raise ValueError(f"start_timeout={start_timeout}: give a positive number of seconds.")
-        self.env = env
-        self._num_workers = None if num_workers is None else int(num_workers)
-        self.envs_per_worker = int(envs_per_worker)
         self.num_cpus_per_worker = float(num_cpus_per_worker)
         self.ray_init_kwargs = dict(ray_init_kwargs or {})
-        self.start_timeout = float(start_timeout)
 
     @property
     def num_workers(self) -> int | None:

@@ -67,6 +67,9 @@ class ShardedEvaluator(PopulationEvaluator, ABC):
     code in a worker is not retried: it is raised here. An error or ``KeyboardInterrupt`` during a generation stops
     the workers (fresh ones start at the next evaluation).
 
+    :param config: The workers' env config (see :func:`~sb3_es.evaluation.worker.env_config`).
+    :param num_workers: Number of workers (``None``: the host's default).
+    :param start_timeout: Seconds to wait for workers to start.
     :param max_restarts: Worker replacements allowed within one generation.
     :param generation_timeout: Seconds a generation may take before the workers are stopped and ``TimeoutError``
         is raised; ``None`` for no limit.
@@ -78,11 +81,29 @@ class ShardedEvaluator(PopulationEvaluator, ABC):
     #: The constructor argument that sets ``max_restarts`` (named in messages).
     restarts_argument = "max_restarts"
 
-    def __init__(self, max_restarts: int = 3, generation_timeout: float | None = None, linger: bool = True) -> None:
+    def __init__(
+        self,
+        config: dict[str, Any],
+        num_workers: int | None,
+        start_timeout: float,
+        max_restarts: int = 3,
+        generation_timeout: float | None = None,
+        linger: bool = True,
+    ) -> None:
+        if num_workers is not None and (int(num_workers) != num_workers or num_workers < 1):
+            raise ValueError(f"num_workers={num_workers}: it must be a positive integer.")
+        if not start_timeout > 0:
+            raise ValueError(f"start_timeout={start_timeout}: give a positive number of seconds.")
         if int(max_restarts) != max_restarts or max_restarts < 0:
             raise ValueError(f"{self.restarts_argument}={max_restarts}: it must be an integer >= 0.")
         if generation_timeout is not None and not generation_timeout > 0:
             raise ValueError(f"generation_timeout={generation_timeout}: give a positive number of seconds, or None.")
+        self._env_config = config
+        #: The env id or factory the workers build their envs from.
+        self.env = config["env"]
+        self.envs_per_worker = int(config["n_envs"])
+        self._num_workers = None if num_workers is None else int(num_workers)
+        self.start_timeout = float(start_timeout)
         self.max_restarts = int(max_restarts)
         self.generation_timeout = generation_timeout
         self.linger = bool(linger)
