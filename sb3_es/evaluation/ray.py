@@ -136,6 +136,11 @@ class RayActorPool(WorkerPool):
                 for actor in self.actors:
                     with contextlib.suppress(Exception):  # already dead, or Ray shutting down
                         ray.kill(actor, no_restart=True)
+                # ray.kill returns at once: wait (a little) until the actors are gone, so that their CPUs are free
+                # for the next evaluator of this process when close() returns.
+                with contextlib.suppress(Exception):
+                    refs = [actor.ready.remote() for actor in self.actors]
+                    ray.wait(refs, num_returns=len(refs), timeout=10.0)
         self.actors = []
         self._tables = []
         self._noise_refs = {}
