@@ -26,7 +26,8 @@ from sharded_helpers import (
 from stable_baselines3.common.env_util import make_vec_env
 
 from sb3_es.evaluation import VecEnvEvaluator
-from sb3_es.evaluation.processes import ProcessEvaluator, RemoteTraceback
+from sb3_es.evaluation.process_worker import RemoteTraceback
+from sb3_es.evaluation.processes import ProcessEvaluator
 from sb3_es.evaluation.sharded import ShardedEvaluator
 from sb3_es.strategies.noise import NoiseTablePopulation, SharedNoiseTable
 

@@ -36,8 +36,8 @@ from sb3_es.evaluation.network import (
     NetworkSpec,
     ParamSlice,
     activation_for,
-    flat_obs_dim,
 )
+from sb3_es.evaluation.observations import flat_obs_dim
 
 __all__ = ["OBS_NORM_EPS", "FlatPolicy", "LinearPolicy", "MlpPolicy", "flat_obs_dim"]
 

@@ -5,8 +5,9 @@ Local processes host the workers of a :class:`~sb3_es.evaluation.sharded.Sharded
 the local engine, so a generation costs one round trip per worker, not one per vec step as with ``SubprocVecEnv``.
 
 Transport: one ``multiprocessing`` pipe per worker carries the calls (the generation's payload is pickled once,
-with ``cloudpickle`` as SB3's ``SubprocVecEnv`` does for env factories, so lambdas are fine)
-and the replies; a shared integer per worker ends the lingering (read at every vec step, without a system call).
+with ``cloudpickle`` as SB3's ``SubprocVecEnv`` does for env factories, so lambdas are fine) and the replies; a
+shared integer per worker ends the lingering (read at every vec step, without a system call). The worker side is
+:mod:`~sb3_es.evaluation.process_worker`.
 Workers are started with ``fork`` on Linux (no imports to repeat: startup in well under a second) and ``spawn``
 elsewhere; they ignore ``SIGINT`` (the driver stops them on ``KeyboardInterrupt``), exit when the driver's end of
 their pipe closes, and are daemons, so that none outlives the driver.
@@ -17,13 +18,10 @@ from __future__ import annotations
 import multiprocessing as mp
 import os
 import pickle
-import signal
 import sys
 import time
-import traceback
-import weakref
 from collections.abc import Callable, Sequence
-from multiprocessing.connection import Connection, wait
+from multiprocessing.connection import wait
 from typing import Any
 
 import cloudpickle
@@ -31,78 +29,11 @@ import gymnasium as gym
 import numpy as np
 from stable_baselines3.common.vec_env import VecEnv
 
-from sb3_es.evaluation.sharded import ShardedEvaluator, WorkerDied, WorkerPool
-from sb3_es.evaluation.worker import ShareRunner, env_config
+from sb3_es.evaluation.pool import WorkerDied, WorkerPool
+from sb3_es.evaluation.process_worker import DRIVER_ENDS, raise_remote, worker_main
+from sb3_es.evaluation.sharded import ShardedEvaluator
+from sb3_es.evaluation.worker import env_config
 from sb3_es.strategies.noise import SharedNoiseTable
-
-#: The driver's ends of every worker pipe of this process: a forked worker closes its copies, so that a worker
-#: sees the end of its pipe when the driver goes away.
-_DRIVER_ENDS: weakref.WeakSet[Connection] = weakref.WeakSet()
-
-
-class RemoteTraceback(Exception):
-    """The traceback of an exception raised in a worker process (set as the ``__cause__`` of the re-raised one)."""
-
-    def __init__(self, tb: str) -> None:
-        super().__init__(tb)
-        self.tb = tb
-
-    def __str__(self) -> str:
-        return f'\n"""\n{self.tb}"""'
-
-
-def _worker_main(conn: Connection, config: bytes, stop: Any, tables: list[SharedNoiseTable]) -> None:
-    """Body of a worker process: build the envs, then serve calls until the driver says so or goes away."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the driver stops its workers on Ctrl-C
-    for end in list(_DRIVER_ENDS):  # copies inherited by fork
-        end.close()
-
-    def reply(*message: Any) -> None:
-        try:
-            conn.send(message)
-        except (pickle.PicklingError, TypeError, AttributeError) as e:  # e.g. an info value that does not pickle
-            error = RuntimeError(f"The worker's {message[0]!r} reply could not be sent to the driver: {e}")
-            conn.send(("error", error, traceback.format_exc()))
-
-    def serve(runner: ShareRunner, kind: str, args: Any) -> None:
-        if kind == "run":
-            payload, candidates, seed, token = args
-            payload = cloudpickle.loads(payload)
-            if token is None:
-                reply("result", runner.run(payload, candidates, seed))
-                return
-
-            def share_done() -> None:
-                conn.send(("done", token))
-
-            reply("result", runner.run(payload, candidates, seed, share_done, lambda: stop.value != token))
-        elif kind == "table":
-            runner.noise_tables[args.key] = args.noise
-        elif kind == "call":
-            reply("result", cloudpickle.loads(args)(runner.env))
-
-    try:
-        try:
-            runner = ShareRunner(cloudpickle.loads(config))
-        except Exception as e:  # e.g. an unknown env id
-            reply("error", e, traceback.format_exc())
-            return
-        for table in tables:
-            runner.noise_tables[table.key] = table.noise
-        reply("ready", runner.env.num_envs)
-        while True:
-            try:
-                kind, args = conn.recv()
-            except (EOFError, OSError):  # the driver is gone
-                return
-            if kind == "exit":
-                return
-            try:
-                serve(runner, kind, args)
-            except Exception as e:
-                reply("error", e, traceback.format_exc())
-    except (BrokenPipeError, ConnectionResetError):  # the driver is gone
-        return
 
 
 class ProcessPool(WorkerPool):
@@ -153,12 +84,12 @@ class ProcessPool(WorkerPool):
         driver_end, worker_end = self._ctx.Pipe()
         tables = list(self._known_tables.values())
         process = self._ctx.Process(
-            target=_worker_main,
+            target=worker_main,
             args=(worker_end, self.config, self._stops[k], tables),
             name=f"sb3-es-worker-{k}",
             daemon=True,
         )
-        _DRIVER_ENDS.add(driver_end)
+        DRIVER_ENDS.add(driver_end)
         process.start()
         worker_end.close()
         self.processes[k], self._conns[k] = process, driver_end
@@ -175,7 +106,7 @@ class ProcessPool(WorkerPool):
         except WorkerDied as e:
             raise RuntimeError(f"Worker process {k} ended while building its envs ({e}).") from e
         if kind == "error":
-            _raise_remote(*rest)
+            raise_remote(*rest)
 
     def _receive(self, k: int, timeout: float | None) -> tuple[Any, ...]:
         """:return: Worker ``k``'s next message. :raises WorkerDied: if it ended; ``TimeoutError``."""
@@ -200,7 +131,7 @@ class ProcessPool(WorkerPool):
             conn = self._conns[k]
             if conn is not None:
                 conn.close()
-                _DRIVER_ENDS.discard(conn)
+                DRIVER_ENDS.discard(conn)
         self.processes, self._conns, self._stops, self._tables, self._inbox = [], [], [], [], {}
 
     def publish(self, payload: dict[str, Any]) -> Any:
@@ -252,7 +183,7 @@ class ProcessPool(WorkerPool):
         while message is None or message[0] == "done":
             message = self._receive(k, None if deadline is None else max(0.0, deadline - time.monotonic()))
         if message[0] == "error":
-            _raise_remote(*message[1:])
+            raise_remote(*message[1:])
         return message[1]
 
     def replace(self, k: int) -> None:
@@ -261,7 +192,7 @@ class ProcessPool(WorkerPool):
             process.kill()
         process.join(5.0)
         self._conns[k].close()
-        _DRIVER_ENDS.discard(self._conns[k])
+        DRIVER_ENDS.discard(self._conns[k])
         self._inbox.pop(k, None)
         self._stops[k] = self._ctx.RawValue("q", 0)
         self._spawn(k)
@@ -271,11 +202,6 @@ class ProcessPool(WorkerPool):
         for k in range(self.num_workers):
             self._send(k, ("call", cloudpickle.dumps(fn)))
         return [self.result(k, None) for k in range(self.num_workers)]
-
-
-def _raise_remote(error: BaseException, tb: str) -> None:
-    """Raise an exception from a worker, with the worker's traceback as its cause."""
-    raise error from RemoteTraceback(tb)
 
 
 def default_start_method() -> str:
@@ -344,22 +270,23 @@ class ProcessEvaluator(ShardedEvaluator):
         generation_timeout: float | None = None,
         linger: bool = True,
     ) -> None:
-        super().__init__(max_worker_restarts, generation_timeout, linger)
-        self._env_config = env_config(
-            env, envs_per_worker, wrapper_class, env_kwargs, wrapper_kwargs, vec_env_cls, vec_env_kwargs, monitor_kwargs
+        config = env_config(
+            env,
+            envs_per_worker,
+            wrapper_class=wrapper_class,
+            env_kwargs=env_kwargs,
+            wrapper_kwargs=wrapper_kwargs,
+            vec_env_cls=vec_env_cls,
+            vec_env_kwargs=vec_env_kwargs,
+            monitor_kwargs=monitor_kwargs,
         )
-        if num_workers is not None and (int(num_workers) != num_workers or num_workers < 1):
-            raise ValueError(f"num_workers={num_workers}: it must be a positive integer.")
+        super().__init__(config, num_workers, start_timeout, max_worker_restarts, generation_timeout, linger)
         start_method = start_method or default_start_method()
         if start_method not in mp.get_all_start_methods():
             raise ValueError(f"start_method={start_method!r}: use one of {mp.get_all_start_methods()}.")
-        if not start_timeout > 0:
-            raise ValueError(f"start_timeout={start_timeout}: give a positive number of seconds.")
-        self.env = env
-        self.num_workers = usable_cpus() if num_workers is None else int(num_workers)
-        self.envs_per_worker = int(envs_per_worker)
         self.start_method = start_method
-        self.start_timeout = float(start_timeout)
+        #: Number of worker processes.
+        self.num_workers = self._num_workers or usable_cpus()
 
     @property
     def _workers(self) -> list[Any]:

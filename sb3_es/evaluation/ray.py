@@ -19,7 +19,8 @@ What crosses the wire per generation (see ``docs/guide/ray.md``):
 
 Sent once per actor (again only if the actor is replaced): the noise table's object reference.
 
-This module imports without Ray; Ray is imported when a :class:`RayEvaluator` is created.
+This module imports without Ray; Ray is imported when a :class:`RayEvaluator` is created. (A little over 300 lines:
+the pool and the evaluator are documented for users who run Ray clusters.)
 """
 
 from __future__ import annotations
@@ -34,9 +35,10 @@ import numpy as np
 from stable_baselines3.common.vec_env import VecEnv
 
 from sb3_es.evaluation import ray_session
+from sb3_es.evaluation.pool import WorkerDied, WorkerPool
 from sb3_es.evaluation.ray_actor import remote_worker_class
 from sb3_es.evaluation.ray_session import import_ray
-from sb3_es.evaluation.sharded import ShardedEvaluator, WorkerDied, WorkerPool
+from sb3_es.evaluation.sharded import ShardedEvaluator
 from sb3_es.evaluation.worker import env_config
 from sb3_es.strategies.noise import SharedNoiseTable
 
@@ -134,6 +136,11 @@ class RayActorPool(WorkerPool):
                 for actor in self.actors:
                     with contextlib.suppress(Exception):  # already dead, or Ray shutting down
                         ray.kill(actor, no_restart=True)
+                # ray.kill returns at once: wait (a little) until the actors are gone, so that their CPUs are free
+                # for the next evaluator of this process when close() returns.
+                with contextlib.suppress(Exception):
+                    refs = [actor.ready.remote() for actor in self.actors]
+                    ray.wait(refs, num_returns=len(refs), timeout=10.0)
         self.actors = []
         self._tables = []
         self._noise_refs = {}
@@ -206,36 +213,12 @@ class RayEvaluator(ShardedEvaluator):
     Evaluates a population on Ray actors, each owning a VecEnv and running its share of the jobs with
     :class:`~sb3_es.evaluation.VecEnvEvaluator` (batched forward pass, as locally).
 
-    Sharding, lingering, callback replay and fault tolerance are those of
-    :class:`~sb3_es.evaluation.sharded.ShardedEvaluator`. The generation's (candidate, episode) jobs, ordered
-    episode by episode as in the local engine, are cut into ``num_workers`` contiguous shares of nearly equal size;
-    share ``k`` runs on actor ``k`` with env seed ``seed + k * envs_per_worker``, so the env slots of the cluster
-    get the seeds a local VecEnv of ``num_workers * envs_per_worker`` envs would get. For envs whose episodes
-    depend only on the reset seed, a result does not depend on which actor process runs a share (a replaced actor
-    re-runs it identically), and with one worker the results are those of the local engine on a VecEnv of
-    ``envs_per_worker`` envs, bit for bit. (Box2D envs such as BipedalWalker keep their physics world across
-    resets, so their episodes also depend, slightly, on what the env ran before, locally as remotely.)
-
-    Idle actors: as the local engine's idle slots do, an actor whose share is done keeps all its slots on the
-    center policy until every share is done (the driver then tells the actors to stop); the completed episodes
-    are reported as center episodes and the steps are counted. So no actor sits idle while another finishes,
-    but the number of these extra steps depends on timing: with several workers, ``num_timesteps`` and the
-    center returns are not reproducible to the step (the candidates' returns, the observation statistics and
-    so the learning are). With one share (one worker, or a single job) there is no lingering.
-
-    Callbacks: remote steps cannot call the driver's callbacks, so when the results are back the step hook is
-    replayed once per remote vec step (the actors' steps interleaved, with each actor's ``n_envs``, its real
-    ``dones`` and ``rewards`` and, for slots whose episode ended, its infos without ``terminal_observation``; the
-    callbacks' ``new_obs`` and ``actions`` are ``None``, as the actors do not send them back): ``num_timesteps``
-    grows by exactly the env steps taken and ``on_step()`` is called once per remote vec step. A callback that
-    returns False stops the replay there and the generation is discarded, as in the local engine (kept only if
-    the stop came at the last replayed step); the remote work of that generation is lost, since a stop request
-    takes effect only once the generation's evaluation has returned.
-
-    Fault tolerance: an actor that dies (node lost, process killed, crash in native code) is replaced by a new
-    one, which re-runs its share with the same seed; the event is logged (``logging`` warning) and counted in
-    :attr:`restarted_actors`. More than ``max_actor_restarts`` replacements within one generation raise an error.
-    An exception raised by the env or policy code inside an actor is not retried: it is raised in the driver.
+    Shares and seeds, lingering, the callback replay and fault tolerance are those of
+    :class:`~sb3_es.evaluation.sharded.ShardedEvaluator` (see there): share ``k`` runs on actor ``k`` with env seed
+    ``seed + k * envs_per_worker``; with one worker the results are the local engine's on a VecEnv of
+    ``envs_per_worker`` envs, bit for bit; an actor that dies is replaced and its share re-run (logged, counted in
+    :attr:`restarted_actors`, at most ``max_actor_restarts`` times per generation); an exception raised by the env
+    in an actor is raised in the driver.
 
     Ray is started with ``ray.init(**ray_init_kwargs)`` if it is not running yet (pass
     ``ray_init_kwargs=dict(address="auto")`` to join a running cluster, or call ``ray.init`` yourself first).
@@ -285,22 +268,21 @@ class RayEvaluator(ShardedEvaluator):
         generation_timeout: float | None = None,
     ) -> None:
         import_ray()
-        super().__init__(max_actor_restarts, generation_timeout)
-        self._env_config = env_config(
-            env, envs_per_worker, wrapper_class, env_kwargs, wrapper_kwargs, vec_env_cls, vec_env_kwargs, monitor_kwargs
+        config = env_config(
+            env,
+            envs_per_worker,
+            wrapper_class=wrapper_class,
+            env_kwargs=env_kwargs,
+            wrapper_kwargs=wrapper_kwargs,
+            vec_env_cls=vec_env_cls,
+            vec_env_kwargs=vec_env_kwargs,
+            monitor_kwargs=monitor_kwargs,
         )
-        if num_workers is not None and (int(num_workers) != num_workers or num_workers < 1):
-            raise ValueError(f"num_workers={num_workers}: it must be a positive integer.")
+        super().__init__(config, num_workers, start_timeout, max_actor_restarts, generation_timeout)
         if not num_cpus_per_worker > 0:
             raise ValueError(f"num_cpus_per_worker={num_cpus_per_worker}: it must be positive.")
-        if not start_timeout > 0:
-            raise ValueError(f"start_timeout={start_timeout}: give a positive number of seconds.")
-        self.env = env
-        self._num_workers = None if num_workers is None else int(num_workers)
-        self.envs_per_worker = int(envs_per_worker)
         self.num_cpus_per_worker = float(num_cpus_per_worker)
         self.ray_init_kwargs = dict(ray_init_kwargs or {})
-        self.start_timeout = float(start_timeout)
 
     @property
     def num_workers(self) -> int | None:

@@ -4,7 +4,8 @@ A :class:`ShardedEvaluator` cuts a generation's (candidate, episode) jobs into o
 worker run its share with the local engine (see :mod:`sb3_es.evaluation.worker`), keeps finished workers busy on
 the center policy until every share is done (lingering), replaces a worker that dies and re-runs its share, merges
 the results (observation statistics by Chan's parallel algorithm), replays the callbacks and records timings. The
-host is a :class:`WorkerPool`: it starts the workers and carries the calls and signals, nothing else.
+host is a :class:`~sb3_es.evaluation.pool.WorkerPool`: it starts the workers and carries the calls and signals,
+nothing else. (A little over 300 lines: the class docstring documents, once, what both hosts do.)
 """
 
 from __future__ import annotations
@@ -22,87 +23,14 @@ from stable_baselines3.common.vec_env import VecEnv
 
 from sb3_es.evaluation.base import PopulationEvaluator, PopulationResult, StepHook
 from sb3_es.evaluation.network import HasNetworkSpec, NetworkSpec, as_network
+from sb3_es.evaluation.pool import WorkerDied, WorkerPool
 from sb3_es.evaluation.shaping import RewardShaping
-from sb3_es.strategies.noise import NoiseTablePopulation, SharedNoiseTable
+from sb3_es.strategies.noise import NoiseTablePopulation
 
 logger = logging.getLogger(__name__)
 
 #: Names the lingering signals of each generation (unique in the process, shared pools included).
 _TOKENS = itertools.count(1)
-
-
-class WorkerDied(Exception):
-    """A worker ended (process killed, node lost, crash in native code) before it returned its share."""
-
-
-class WorkerPool(ABC):
-    """
-    The host of a sharded evaluator's workers: each worker owns a VecEnv and runs shares with the local engine.
-
-    Every blocking call takes a timeout (seconds, ``None`` for none) and raises ``TimeoutError`` when it passes.
-    """
-
-    #: Number of workers once started (``None`` before, when it is resolved at start).
-    size: int | None
-    #: Env slots of each worker's VecEnv.
-    envs_per_worker: int
-    #: True while a generation is in flight (a shared pool is then not released to make room for another).
-    busy: bool = False
-
-    @property
-    @abstractmethod
-    def started(self) -> bool:
-        """:return: Whether the workers are running."""
-
-    @abstractmethod
-    def start(self) -> None:
-        """Create the workers if there are none and wait until they are ready (raise a clear error on timeout)."""
-
-    @abstractmethod
-    def close(self) -> None:
-        """Stop every worker (a later :meth:`start` creates fresh ones)."""
-
-    @abstractmethod
-    def publish(self, payload: dict[str, Any]) -> Any:
-        """:return: A handle on the generation's payload, passed to :meth:`submit` (e.g. a Ray object reference)."""
-
-    @abstractmethod
-    def submit(
-        self, k: int, handle: Any, candidates: np.ndarray, seed: int, token: int | None, table: SharedNoiseTable | None
-    ) -> None:
-        """
-        Start worker ``k`` on a share (sending it the noise table first if it lacks it).
-
-        :param token: The generation's token if the worker should linger (see :class:`~.worker.ShareRunner`).
-        :raises WorkerDied: If the worker is dead.
-        """
-
-    @abstractmethod
-    def wait_share_done(self, ks: Sequence[int], timeout: float | None) -> tuple[int, WorkerDied | None]:
-        """
-        Wait until one of the lingering workers ``ks`` has finished its share (or failed), or died.
-
-        :return: The worker, and the error if it died.
-        """
-
-    @abstractmethod
-    def stop_lingering(self, k: int, token: int) -> None:
-        """Tell worker ``k`` to end generation ``token``'s lingering."""
-
-    @abstractmethod
-    def result(self, k: int, timeout: float | None) -> dict[str, Any]:
-        """
-        :return: Worker ``k``'s output for its share (see :meth:`~.worker.ShareRunner.run`).
-        :raises WorkerDied: If it died; an exception raised in the worker is raised here.
-        """
-
-    @abstractmethod
-    def replace(self, k: int) -> None:
-        """Stop worker ``k`` if it still runs and start a new one in its place."""
-
-    @abstractmethod
-    def call(self, fn: Callable[[VecEnv], Any]) -> list[Any]:
-        """:return: ``fn(vec_env)`` run in every worker, in worker order."""
 
 
 def _remaining(deadline: float | None) -> float | None:
@@ -116,17 +44,32 @@ class ShardedEvaluator(PopulationEvaluator, ABC):
     Shares: the generation's (candidate, episode) jobs, ordered episode by episode as in the local engine, are cut
     into ``num_workers`` contiguous shares of nearly equal size; share ``k`` runs on worker ``k`` with env seed
     ``seed + k * envs_per_worker``, so the env slots get the seeds a local VecEnv of ``num_workers *
-    envs_per_worker`` envs would get, and with one worker the results are the local engine's, bit for bit.
+    envs_per_worker`` envs would get. For envs whose episodes depend only on the reset seed, a result does not
+    depend on which process runs a share (a replaced worker re-runs it identically), and with one worker the
+    results are the local engine's, bit for bit. (Box2D envs such as BipedalWalker keep their physics world across
+    resets, so their episodes also depend, slightly, on what the env ran before, locally as remotely.)
 
-    Lingering: a worker whose share is done keeps its slots on the center policy until every share is done; the
-    completed episodes are reported as center episodes and the steps counted, so no worker idles at the end of a
-    generation, but these extra steps depend on timing. Pass ``linger=False`` for step counts that do not.
+    Lingering: as the local engine's idle slots do, a worker whose share is done keeps its slots on the center
+    policy until every share is done (the driver then tells the workers to stop); the completed episodes are
+    reported as center episodes and the steps counted. So no worker idles at the end of a generation, but these
+    extra steps depend on timing: with several workers, ``num_timesteps`` and the center returns are not
+    reproducible to the step (the candidates' returns, the observation statistics and so the parameters are).
+    ``linger=False`` makes the step counts reproducible too, at the cost of idle workers. One share never lingers.
 
-    Callbacks are replayed once per remote vec step when the results are back; a dead worker is replaced and its
-    share re-run with the same seed (more than ``max_restarts`` replacements in one generation raise an error);
-    an exception raised in a worker is raised here. An error or ``KeyboardInterrupt`` during a generation stops
+    Callbacks: remote steps cannot call the driver's callbacks, so when the results are back the step hook is
+    replayed once per remote vec step (see :meth:`_replay`): ``num_timesteps`` grows by exactly the env steps taken.
+    A callback that returns False stops the replay there and the generation is discarded, as in the local engine
+    (kept only if the stop came at the last replayed step); the remote work of that generation is lost.
+
+    Faults: a worker that dies (process killed, node lost, crash in native code) is replaced and its share re-run
+    with the same seed; the event is logged (``logging`` warning) and counted in :attr:`restarted_workers`; more
+    than ``max_restarts`` replacements in one generation raise an error. An exception raised by the env or policy
+    code in a worker is not retried: it is raised here. An error or ``KeyboardInterrupt`` during a generation stops
     the workers (fresh ones start at the next evaluation).
 
+    :param config: The workers' env config (see :func:`~sb3_es.evaluation.worker.env_config`).
+    :param num_workers: Number of workers (``None``: the host's default).
+    :param start_timeout: Seconds to wait for workers to start.
     :param max_restarts: Worker replacements allowed within one generation.
     :param generation_timeout: Seconds a generation may take before the workers are stopped and ``TimeoutError``
         is raised; ``None`` for no limit.
@@ -138,11 +81,29 @@ class ShardedEvaluator(PopulationEvaluator, ABC):
     #: The constructor argument that sets ``max_restarts`` (named in messages).
     restarts_argument = "max_restarts"
 
-    def __init__(self, max_restarts: int = 3, generation_timeout: float | None = None, linger: bool = True) -> None:
+    def __init__(
+        self,
+        config: dict[str, Any],
+        num_workers: int | None,
+        start_timeout: float,
+        max_restarts: int = 3,
+        generation_timeout: float | None = None,
+        linger: bool = True,
+    ) -> None:
+        if num_workers is not None and (int(num_workers) != num_workers or num_workers < 1):
+            raise ValueError(f"num_workers={num_workers}: it must be a positive integer.")
+        if not start_timeout > 0:
+            raise ValueError(f"start_timeout={start_timeout}: give a positive number of seconds.")
         if int(max_restarts) != max_restarts or max_restarts < 0:
             raise ValueError(f"{self.restarts_argument}={max_restarts}: it must be an integer >= 0.")
         if generation_timeout is not None and not generation_timeout > 0:
             raise ValueError(f"generation_timeout={generation_timeout}: give a positive number of seconds, or None.")
+        self._env_config = config
+        #: The env id or factory the workers build their envs from.
+        self.env = config["env"]
+        self.envs_per_worker = int(config["n_envs"])
+        self._num_workers = None if num_workers is None else int(num_workers)
+        self.start_timeout = float(start_timeout)
         self.max_restarts = int(max_restarts)
         self.generation_timeout = generation_timeout
         self.linger = bool(linger)

@@ -39,19 +39,14 @@ def make_env_fn(env: str | Callable[..., gym.Env]) -> Callable[..., gym.Env]:
     return env
 
 
-def env_config(
-    env: str | Callable[..., gym.Env],
-    envs_per_worker: int,
-    wrapper_class: Callable[[gym.Env], gym.Env] | None = None,
-    env_kwargs: dict[str, Any] | None = None,
-    wrapper_kwargs: dict[str, Any] | None = None,
-    vec_env_cls: type[VecEnv] | None = None,
-    vec_env_kwargs: dict[str, Any] | None = None,
-    monitor_kwargs: dict[str, Any] | None = None,
-) -> dict[str, Any]:
+def env_config(env: str | Callable[..., gym.Env], envs_per_worker: int, **make_vec_env_kwargs: Any) -> dict[str, Any]:
     """
     Check the env arguments of a sharded evaluator and gather them for :class:`ShareRunner`.
 
+    :param env: Env id or picklable env factory.
+    :param envs_per_worker: Env slots of each worker's VecEnv.
+    :param make_vec_env_kwargs: ``wrapper_class``, ``env_kwargs``, ``wrapper_kwargs``, ``vec_env_cls`` (``None``:
+        ``DummyVecEnv``), ``vec_env_kwargs``, ``monitor_kwargs``, as SB3's ``make_vec_env`` takes them.
     :return: The keyword arguments of ``make_vec_env``, with the env id or factory under ``"env"``.
     """
     if not (isinstance(env, str) or callable(env)):
@@ -61,16 +56,8 @@ def env_config(
         )
     if int(envs_per_worker) != envs_per_worker or envs_per_worker < 1:
         raise ValueError(f"envs_per_worker={envs_per_worker}: it must be a positive integer.")
-    return dict(
-        env=env,
-        n_envs=int(envs_per_worker),
-        wrapper_class=wrapper_class,
-        env_kwargs=env_kwargs,
-        wrapper_kwargs=wrapper_kwargs,
-        vec_env_cls=vec_env_cls or DummyVecEnv,
-        vec_env_kwargs=vec_env_kwargs,
-        monitor_kwargs=monitor_kwargs,
-    )
+    vec_env_cls = make_vec_env_kwargs.pop("vec_env_cls", None) or DummyVecEnv
+    return dict(env=env, n_envs=int(envs_per_worker), vec_env_cls=vec_env_cls, **make_vec_env_kwargs)
 
 
 class ShareRunner:

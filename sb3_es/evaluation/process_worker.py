@@ -1,0 +1,95 @@
+"""The body of a worker process of :class:`~sb3_es.evaluation.processes.ProcessEvaluator`, and its error transport.
+
+A worker builds its envs (a :class:`~sb3_es.evaluation.worker.ShareRunner`), says it is ready, then serves the
+driver's calls over its pipe: run a share (lingering signalled by ``("done", token)`` and ended by a shared
+integer), keep a noise table, call a function on its VecEnv. An exception is sent back with its traceback, and
+re-raised in the driver with that traceback as its cause.
+"""
+
+from __future__ import annotations
+
+import pickle
+import signal
+import traceback
+import weakref
+from multiprocessing.connection import Connection
+from typing import Any
+
+import cloudpickle
+
+from sb3_es.evaluation.worker import ShareRunner
+from sb3_es.strategies.noise import SharedNoiseTable
+
+#: The driver's ends of every worker pipe of this process: a forked worker closes its copies, so that a worker
+#: sees the end of its pipe when the driver goes away.
+DRIVER_ENDS: weakref.WeakSet[Connection] = weakref.WeakSet()
+
+
+class RemoteTraceback(Exception):
+    """The traceback of an exception raised in a worker process (set as the ``__cause__`` of the re-raised one)."""
+
+    def __init__(self, tb: str) -> None:
+        super().__init__(tb)
+        self.tb = tb
+
+    def __str__(self) -> str:
+        return f'\n"""\n{self.tb}"""'
+
+
+def worker_main(conn: Connection, config: bytes, stop: Any, tables: list[SharedNoiseTable]) -> None:
+    """Body of a worker process: build the envs, then serve calls until the driver says so or goes away."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the driver stops its workers on Ctrl-C
+    for end in list(DRIVER_ENDS):  # copies inherited by fork
+        end.close()
+
+    def reply(*message: Any) -> None:
+        try:
+            conn.send(message)
+        except (pickle.PicklingError, TypeError, AttributeError) as e:  # e.g. an info value that does not pickle
+            error = RuntimeError(f"The worker's {message[0]!r} reply could not be sent to the driver: {e}")
+            conn.send(("error", error, traceback.format_exc()))
+
+    def serve(runner: ShareRunner, kind: str, args: Any) -> None:
+        if kind == "run":
+            payload, candidates, seed, token = args
+            payload = cloudpickle.loads(payload)
+            if token is None:
+                reply("result", runner.run(payload, candidates, seed))
+                return
+
+            def share_done() -> None:
+                conn.send(("done", token))
+
+            reply("result", runner.run(payload, candidates, seed, share_done, lambda: stop.value != token))
+        elif kind == "table":
+            runner.noise_tables[args.key] = args.noise
+        elif kind == "call":
+            reply("result", cloudpickle.loads(args)(runner.env))
+
+    try:
+        try:
+            runner = ShareRunner(cloudpickle.loads(config))
+        except Exception as e:  # e.g. an unknown env id
+            reply("error", e, traceback.format_exc())
+            return
+        for table in tables:
+            runner.noise_tables[table.key] = table.noise
+        reply("ready", runner.env.num_envs)
+        while True:
+            try:
+                kind, args = conn.recv()
+            except (EOFError, OSError):  # the driver is gone
+                return
+            if kind == "exit":
+                return
+            try:
+                serve(runner, kind, args)
+            except Exception as e:
+                reply("error", e, traceback.format_exc())
+    except (BrokenPipeError, ConnectionResetError):  # the driver is gone
+        return
+
+
+def raise_remote(error: BaseException, tb: str) -> None:
+    """Raise an exception from a worker, with the worker's traceback as its cause."""
+    raise error from RemoteTraceback(tb)
