@@ -57,6 +57,8 @@ def quickstart(timesteps: int, log_folder: str, seed: int | None) -> tuple[ARS, 
     before, _ = evaluate_policy(model, eval_env, n_eval_episodes=n_eval_episodes)
     start = time.perf_counter()
     model.learn(timesteps, log_interval=10)
+    if model.logger.name_to_value:  # generations since the last dump (a run shorter than 10 generations has some)
+        model.dump_logs()
     elapsed = time.perf_counter() - start
     after, _ = evaluate_policy(model, eval_env, n_eval_episodes=n_eval_episodes)
     run_dir = model.logger.get_dir() or log_folder

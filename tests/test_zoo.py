@@ -344,7 +344,7 @@ def test_all_plots_and_plot_train(runs: Path, tmp_path: Path, capsys: pytest.Cap
     assert "0.0 +/- 0.0" not in table  # every run was found and read
     assert pickle.with_suffix(".pkl").is_file()
     for key in KEYS:
-        zoo("plot_train", "-a", key, "-e", "Pendulum-v1", "-f", str(runs / "logs"))
+        zoo("plot_train", "-a", key, "-e", "Pendulum-v1", "-f", str(runs / "logs"), "-w", "2")
 
 
 def test_push_to_hub_uses_the_sb3_es_name(runs: Path, monkeypatch: pytest.MonkeyPatch) -> None:

@@ -317,8 +317,7 @@ class PopulationAlgorithm(ESBaseAlgorithm):
         :param total_timesteps: Env steps to train for.
         :param callback: Callback(s) called at every vec step; returning False stops training at once
             (the interrupted generation is discarded, the parameters stay those of the last update).
-        :param log_interval: Number of generations between two log dumps (and one at the end for the generations
-            since the last dump); ``None``: no dumps.
+        :param log_interval: Number of generations between two log dumps.
         :param tb_log_name: Name of the TensorBoard run.
         :param reset_num_timesteps: Whether to reset ``num_timesteps`` (False to continue a run).
         :param progress_bar: Display a progress bar (tqdm and rich).
@@ -332,7 +331,6 @@ class PopulationAlgorithm(ESBaseAlgorithm):
         self._stop_training = False
         if self.verbose >= 1:
             print(self._generation_size_message(total_timesteps))
-        dumped = self._n_updates
         while self.num_timesteps < total_timesteps and not self._stop_training:
             self._update_current_progress_remaining(self.num_timesteps, total_timesteps)
             if not self._run_generation(evaluator, callback):
@@ -340,9 +338,6 @@ class PopulationAlgorithm(ESBaseAlgorithm):
             self._n_updates += 1
             if log_interval is not None and self._n_updates % log_interval == 0:
                 self.dump_logs(self._n_updates)
-                dumped = self._n_updates
-        if log_interval is not None and self._n_updates > dumped:  # a run shorter than log_interval still logs
-            self.dump_logs(self._n_updates)
         callback.on_training_end()
         return self
 
