@@ -18,14 +18,13 @@ wall-clock time.
 from __future__ import annotations
 
 import argparse
-import os
-import platform
 import sys
 import time
 from typing import Any
 
 import gymnasium as gym
 import shimmy
+from common import hardware, versions
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.evaluation import evaluate_policy
 
@@ -125,7 +124,7 @@ def main() -> None:
     parser.add_argument("--variants", default="V1,V2")
     parser.add_argument("--policy", choices=sorted(POLICIES), default="linear")
     args = parser.parse_args()
-    print(f"hardware: {os.cpu_count()} CPUs, {platform.processor() or platform.machine()}")
+    print(f"hardware: {hardware()}; versions: {versions()}")
     threshold = PRESETS[args.env]["threshold"]
     print(f"command: python {' '.join(sys.argv)}")
     print(f"policy: {args.policy} {POLICIES[args.policy]}")

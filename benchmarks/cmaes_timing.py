@@ -13,13 +13,12 @@ strategy's share of the generation's wall time. The target is a share under 10% 
 from __future__ import annotations
 
 import argparse
-import os
-import platform
 import time
 from collections.abc import Callable
 from typing import Any
 
 import numpy as np
+from common import hardware, versions
 from stable_baselines3.common.env_util import make_vec_env
 from torch import nn
 
@@ -94,7 +93,7 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
     print("# CMA-ES strategy vs rollout time, BipedalWalker-v3, 2,804 parameters, population 64")
-    print(f"hardware: {os.cpu_count()} CPUs, {platform.processor() or platform.machine()}; n_envs={args.n_envs}")
+    print(f"hardware: {hardware()}; n_envs={args.n_envs}; versions: {versions()}")
     print("| covariance | ask+tell s/gen | rollout s/gen | strategy share |")
     print("|---|---|---|---|")
     for label, diagonal in (("full", False), ("diagonal (default: auto)", "auto")):

@@ -52,8 +52,6 @@ import contextlib
 import io
 import json
 import math
-import os
-import platform
 import re
 import shlex
 import shutil
@@ -69,6 +67,7 @@ import gymnasium as gym
 import numpy as np
 import torch
 import yaml
+from common import hardware, versions
 from stable_baselines3.common.callbacks import EvalCallback
 from stable_baselines3.common.utils import set_random_seed
 from stable_baselines3.common.vec_env import VecEnv
@@ -535,22 +534,6 @@ def _mean_std(values: list[float]) -> str:
     return f"{np.mean(values):.1f} ± {np.std(values):.1f}"
 
 
-def hardware() -> str:
-    """
-    One line describing this machine.
-
-    :return: CPU model, core count, OS.
-    """
-    cpu = platform.processor() or platform.machine()
-    with contextlib.suppress(OSError):
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    system = f"{platform.system()} {platform.release()}, Python {platform.python_version()}"
-    return f"{cpu}, {os.cpu_count()} logical CPUs, {system}"
-
-
 def write_report(out: Path, runs: list[dict[str, Any]], thresholds: dict[str, float], band: str, command: str) -> Path:
     """
     The wall-clock plots (one PNG per env) and ``results.md``, the race table; the env-steps curves and rliable's
@@ -563,10 +546,6 @@ def write_report(out: Path, runs: list[dict[str, Any]], thresholds: dict[str, fl
     :param command: Command line, for the record.
     :return: Path of ``results.md``.
     """
-    import stable_baselines3
-
-    import sb3_es
-
     dates = [r.get("date") or "?" for r in runs]
     lines = [
         "# Benchmark results",
@@ -574,8 +553,7 @@ def write_report(out: Path, runs: list[dict[str, Any]], thresholds: dict[str, fl
         *[f"- Training command: `{c}`" for c in sorted({r.get("command") or "?" for r in runs})],
         f"- Report command: `{command}`",
         *[f"- Hardware: {h}" for h in sorted({r.get("hardware") or hardware() for r in runs})],
-        f"- Versions: sb3-es {sb3_es.__version__}, Stable-Baselines3 {stable_baselines3.__version__}, "
-        f"rl-zoo3 {rl_zoo3.__version__}, torch {torch.__version__}, gymnasium {gym.__version__}",
+        f"- Versions: {versions('rl_zoo3')}",
         f"- Runs dated: {min(dates)} to {max(dates)}",
         "- Returns: mean over the evaluation episodes of the deterministic policy; across seeds, mean ± std.",
         "  *final*: last evaluation; *env steps*: taken (a run ends within one generation or rollout past its",

@@ -22,9 +22,9 @@ from typing import Any
 import numpy as np
 import torch
 import yaml
+from common import system_info
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.evaluation import evaluate_policy
-from stable_baselines3.common.utils import get_system_info
 
 import sb3_es
 
@@ -89,11 +89,7 @@ def main() -> None:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
-    info = {
-        "system": get_system_info(print_info=False)[0],
-        "date": time.strftime("%Y-%m-%d %H:%M %Z"),
-        "commit": commit,
-    }
+    info = {"system": system_info(), "date": time.strftime("%Y-%m-%d %H:%M %Z"), "commit": commit}
     record = {"args": vars(args), "kwargs": kwargs, "runs": rows, "median": median, **info}
     (out / "headline.json").write_text(json.dumps(record, indent=2, default=str))
 

@@ -36,21 +36,17 @@ from __future__ import annotations
 
 import argparse
 import math
-import multiprocessing as mp
 import os
-import platform
 import sys
 import time
 from dataclasses import dataclass, field
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
-import stable_baselines3 as sb3
 import torch as th
+from common import hardware, measure_plain, versions
 from stable_baselines3.common.env_util import make_vec_env
 
-import sb3_es
 from sb3_es import ARS
 from sb3_es.evaluation import VecEnvEvaluator
 
@@ -131,53 +127,8 @@ def ray_row(env_id: str, workers: int, envs_per_worker: int) -> Row:
     )
 
 
-def _plain_worker(env_id: str, seconds: float, seed: int, barrier: Any, queue: Any) -> None:
-    env = gym.make(env_id)
-    env.reset(seed=seed)
-    env.action_space.seed(seed)
-
-    def loop(duration: float) -> tuple[int, float]:
-        steps = 0
-        start = time.perf_counter()
-        while time.perf_counter() < start + duration:
-            for _ in range(100):
-                _, _, terminated, truncated, _ = env.step(env.action_space.sample())
-                steps += 1
-                if terminated or truncated:
-                    env.reset()
-        return steps, time.perf_counter() - start
-
-    loop(1.0)
-    barrier.wait()
-    queue.put(loop(seconds))
-
-
-def measure_plain(env_id: str, n_procs: int, seconds: float) -> float:
-    """:return: Env steps per second of ``n_procs`` processes stepping ``env_id`` with random actions."""
-    ctx = mp.get_context("spawn")
-    barrier, queue = ctx.Barrier(n_procs), ctx.Queue()
-    procs = [ctx.Process(target=_plain_worker, args=(env_id, seconds, i, barrier, queue)) for i in range(n_procs)]
-    for proc in procs:
-        proc.start()
-    outs = [queue.get() for _ in procs]
-    for proc in procs:
-        proc.join()
-    return sum(steps / elapsed for steps, elapsed in outs)
-
-
 def fmt(value: float, digits: int = 0) -> str:
     return "-" if value is None or not np.isfinite(value) else f"{value:,.{digits}f}"
-
-
-def cpu_model() -> str:
-    try:
-        with open("/proc/cpuinfo") as f:
-            for line in f:
-                if line.startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown CPU"
 
 
 def benchmark_env(env_id: str, per_worker: list[int], rounds: int, turn: float) -> tuple[list[Row], int]:
@@ -222,7 +173,7 @@ def main() -> None:
     plain: dict[tuple[str, int], list[float]] = {}
     for env_id in env_ids:
         for n in (1, 2):
-            plain[(env_id, n)] = [measure_plain(env_id, n, plain_seconds)]
+            plain[(env_id, n)] = [measure_plain(env_id, n, plain_seconds).rate]
 
     import ray
 
@@ -235,15 +186,14 @@ def main() -> None:
         ray.shutdown()
     for env_id in env_ids:
         for n in (1, 2):
-            plain[(env_id, n)].append(measure_plain(env_id, n, plain_seconds))
+            plain[(env_id, n)].append(measure_plain(env_id, n, plain_seconds).rate)
     load.append(os.getloadavg()[0])
 
     print()
     print(f"Command: `python {' '.join(sys.argv)}`")
     print(
-        f"Hardware: {cpu_model()}, {os.cpu_count()} CPUs; 1-minute load average {load[0]:.1f} before, {load[1]:.1f} "
-        f"after. Versions: Python {platform.python_version()}, sb3-es {sb3_es.__version__}, SB3 {sb3.__version__}, "
-        f"Ray {ray.__version__}, gymnasium {gym.__version__}, NumPy {np.__version__}, torch {th.__version__}."
+        f"Hardware: {hardware()}; 1-minute load average {load[0]:.1f} before, {load[1]:.1f} after. "
+        f"Versions: {versions('ray')}."
     )
     print(f"ARS MlpPolicy [64, 64], n_delta=8 (16 candidates x 1 episode per generation); {rounds} interleaved rounds.")
     for env_id, (rows, per_turn) in results.items():

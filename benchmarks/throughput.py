@@ -30,9 +30,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import importlib.util
-import multiprocessing as mp
 import os
-import platform
 import sys
 import time
 from collections import defaultdict
@@ -43,16 +41,14 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
-import sb3_contrib
-import stable_baselines3 as sb3
 import torch as th
+from common import hardware, measure_plain, versions
 from sb3_contrib import ARS as ContribARS
 from sb3_contrib.common.vec_env import AsyncEval
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv
 
-import sb3_es
 from sb3_es import ARS
 from sb3_es.evaluation.base import ObsStats
 from sb3_es.evaluation.network import NetworkSpec
@@ -194,51 +190,16 @@ def measure_contrib(env_id: str, n_workers: int, seconds: float, warmup: float) 
         env.close()
 
 
-def _plain_worker(env_id: str, seconds: float, warmup: float, seed: int, barrier: Any, queue: Any) -> None:
-    env = gym.make(env_id)
-    env.reset(seed=seed)
-    env.action_space.seed(seed)
-
-    def loop(duration: float) -> tuple[int, int, float]:
-        steps = episodes = 0
-        start = time.perf_counter()
-        end = start + duration
-        while time.perf_counter() < end:
-            for _ in range(100):
-                _, _, terminated, truncated, _ = env.step(env.action_space.sample())
-                steps += 1
-                if terminated or truncated:
-                    episodes += 1
-                    env.reset()
-        return steps, episodes, time.perf_counter() - start
-
-    loop(warmup)
-    barrier.wait()
-    queue.put(loop(seconds))
-    env.close()
-
-
-def measure_plain(env_id: str, n_procs: int, seconds: float, warmup: float) -> Result:
-    ctx = mp.get_context("forkserver" if "forkserver" in mp.get_all_start_methods() else "spawn")
-    barrier, queue = ctx.Barrier(n_procs), ctx.Queue()
-    procs = [
-        ctx.Process(target=_plain_worker, args=(env_id, seconds, warmup, i, barrier, queue)) for i in range(n_procs)
-    ]
-    for proc in procs:
-        proc.start()
-    outs = [queue.get() for _ in procs]
-    for proc in procs:
-        proc.join()
-    rate = sum(steps / elapsed for steps, _, elapsed in outs)
-    elapsed = max(out[2] for out in outs)
-    steps, episodes = sum(out[0] for out in outs), sum(out[1] for out in outs)
+def measure_plain_loop(env_id: str, n_procs: int, seconds: float, warmup: float) -> Result:
+    """The plain step loop in ``n_procs`` processes (:func:`common.measure_plain`), as a table row."""
+    plain = measure_plain(env_id, n_procs, seconds, warmup)
     return Result(
         env_id,
         "plain step loop",
         f"{n_procs} proc, gym.make + action_space.sample()",
-        round(rate * elapsed),
-        elapsed,
-        steps / episodes if episodes else None,
+        round(plain.rate * plain.seconds),
+        plain.seconds,
+        plain.steps / plain.episodes if plain.episodes else None,
     )
 
 
@@ -421,7 +382,7 @@ def main() -> None:
     lines: list[str] = []
     checks: list[str] = []
     if args.only in (None, "bipedal"):
-        plain = run(measure_plain, BIPEDAL, 2)
+        plain = run(measure_plain_loop, BIPEDAL, 2)
         ours_sub2 = run(measure_ours, BIPEDAL, 2, True)
         ours = [ours_sub2, run(measure_ours, BIPEDAL, 4, True)]
         ours += [run(measure_ours, BIPEDAL, n, False) for n in (2, 4, 8)]
@@ -429,7 +390,7 @@ def main() -> None:
         ours += ours_procs
         contrib_async = run(measure_contrib, BIPEDAL, 2)
         contrib_single = run(measure_contrib, BIPEDAL, 0)
-        plain1 = run(measure_plain, BIPEDAL, 1)
+        plain1 = run(measure_plain_loop, BIPEDAL, 1)
         # Ray last: its daemons (GCS, raylet) keep running until ray.shutdown() and would slow later rows.
         ours_ray = [run(measure_ours_sharded, "ray", BIPEDAL, 2, k) for k in (2, 4)] if HAVE_RAY else []
         ours += ours_ray
@@ -458,8 +419,8 @@ def main() -> None:
         ours = [ours16] + [run(measure_ours, PENDULUM, n, False) for n in (1, 4)]
         ours_procs = [run(measure_ours_sharded, "processes", PENDULUM, 2, k) for k in (4, 8)]
         contrib_single = run(measure_contrib, PENDULUM, 0)
-        plain1 = run(measure_plain, PENDULUM, 1)
-        plain2 = run(measure_plain, PENDULUM, 2)
+        plain1 = run(measure_plain_loop, PENDULUM, 1)
+        plain2 = run(measure_plain_loop, PENDULUM, 2)
         ours_ray = [run(measure_ours_sharded, "ray", PENDULUM, 2, 8)] if HAVE_RAY else []
         if lines:
             lines.append("")
@@ -477,15 +438,10 @@ def main() -> None:
     print("\n## Throughput: env steps per second\n")
     print(f"- command: `{command}` ({seconds:g} s timed window, {warmup:g} s warm-up per measurement)")
     print(
-        f"- hardware: os.cpu_count()={os.cpu_count()}, processor={platform.processor() or 'unknown'}, "
-        f"{platform.platform()}, torch threads={th.get_num_threads()}, 1-min load average "
-        f"{load_start:.1f} at start / {os.getloadavg()[0]:.1f} at end"
+        f"- hardware: {hardware()}; torch threads={th.get_num_threads()}, 1-min load average {load_start:.1f} at "
+        f"start / {os.getloadavg()[0]:.1f} at end"
     )
-    print(
-        f"- versions: Python {platform.python_version()}, sb3-es {sb3_es.__version__}, stable-baselines3 "
-        f"{sb3.__version__}, sb3-contrib {sb3_contrib.__version__}, torch {th.__version__}, numpy "
-        f"{np.__version__}, gymnasium {gym.__version__}"
-    )
+    print(f"- versions: {versions('sb3-contrib')}")
     print("- 'vs plain': ratio to the plain loop with the same number of processes (BipedalWalker: 2, Pendulum: 1;")
     print("  the checks compare every 2-worker configuration with the plain 2-process loop);")
     print("  'vs contrib': ratio to sb3-contrib's ARS (BipedalWalker: AsyncEval 2 proc, Pendulum: single process)\n")

@@ -10,7 +10,6 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
-from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.vec_env import VecEnv
 
@@ -245,41 +244,6 @@ def read_csv(path: Path) -> list[dict[str, str]]:
     """Rows of an SB3 ``progress.csv``."""
     with open(path, newline="") as f:
         return list(csv.DictReader(f))
-
-
-class GenerationRecorder(BaseCallback):
-    """
-    Counts callback calls and remembers, at each generation (rollout) start, the vec-step count, the policy
-    parameters and the observation count. ``stop_at``: return False from that call of ``on_step`` on;
-    ``stop_in_generation``/``offset``: stop on the ``offset``-th vec step of that generation.
-    """
-
-    def __init__(self, stop_at: int | None = None, stop_in_generation: int | None = None, offset: int = 0) -> None:
-        super().__init__()
-        self.stop_at = stop_at
-        self.stop_in_generation = stop_in_generation
-        self.offset = offset
-        self.rollout_starts: list[int] = []
-        self.params_at_start: list[np.ndarray] = []
-        self.obs_count_at_start: list[float] = []
-        self.training_started = 0
-        self.training_ended = 0
-
-    def _on_training_start(self) -> None:
-        self.training_started += 1
-
-    def _on_rollout_start(self) -> None:
-        self.rollout_starts.append(self.n_calls)
-        self.params_at_start.append(self.model.policy.parameters_to_vector())
-        self.obs_count_at_start.append(float(self.model.policy.obs_count.item()))
-        if self.stop_in_generation is not None and len(self.rollout_starts) == self.stop_in_generation:
-            self.stop_at = self.n_calls + self.offset
-
-    def _on_step(self) -> bool:
-        return self.stop_at is None or self.n_calls < self.stop_at
-
-    def _on_training_end(self) -> None:
-        self.training_ended += 1
 
 
 class CrashingToyEnv(ToyEnv):

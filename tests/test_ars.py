@@ -1,20 +1,18 @@
-"""ARS as an SB3 algorithm: learning, step accounting, callbacks, logging, schedules and environments."""
+"""What is specific to ARS: its logged values, schedules, update rule, V1/V2, n_top, alive bonus, environments.
+
+What every algorithm does (learning, step accounting, callbacks, logging) is in ``test_algorithms.py``.
+"""
 
 from __future__ import annotations
 
-import csv
+import inspect
 from pathlib import Path
-from typing import Any
 
-import gymnasium as gym
 import numpy as np
 import pytest
-from envs import GenerationRecorder as Recorder
-from envs import StepCounter
-from stable_baselines3.common.callbacks import StopTrainingOnMaxEpisodes
+from algorithms import learn_logged, progress_at_generation_starts, spy_on_ask
+from envs import counting_env
 from stable_baselines3.common.env_util import make_vec_env
-from stable_baselines3.common.evaluation import evaluate_policy
-from stable_baselines3.common.logger import configure
 from stable_baselines3.common.vec_env import SubprocVecEnv, VecNormalize
 
 from sb3_es import ARS
@@ -23,163 +21,19 @@ from sb3_es.strategies import ARSStrategy
 PENDULUM_GENERATION = 2 * 2 * 200  # n_delta=2, 200-step episodes, 1 env
 
 
-def read_csv(path: Path) -> list[dict[str, str]]:
-    with open(path, newline="") as f:
-        return list(csv.DictReader(f))
-
-
-# ---------------------------------------------------------------------------- learning
-def test_learns_cartpole() -> None:
-    model = ARS("LinearPolicy", "CartPole-v1", n_delta=2, seed=0)
-    model.learn(40_000)
-    eval_env = make_vec_env("CartPole-v1", n_envs=1, seed=123)
-    mean_return, _ = evaluate_policy(model, eval_env, n_eval_episodes=10, deterministic=True)
-    assert mean_return >= 475
-
-
-# ---------------------------------------------------------------------------- step accounting and callbacks
-def counting_env(env_id: str, n_envs: int, counter: list[int], **kwargs: Any) -> Any:
-    return make_vec_env(
-        env_id, n_envs=n_envs, wrapper_class=StepCounter, wrapper_kwargs=dict(counter=counter), **kwargs
-    )
-
-
-def test_exact_timestep_count() -> None:
-    counter = [0]
-    env = counting_env("CartPole-v1", 3, counter)
-    model = ARS("LinearPolicy", env, n_delta=3, n_eval_episodes=2, seed=1)
-    recorder = Recorder()
-    model.learn(1500, callback=recorder)
-    assert model.num_timesteps >= 1500
-    assert model.num_timesteps == counter[0]
-    assert model.num_timesteps % 3 == 0
-    # on_step once per vec step
-    assert recorder.n_calls == model.num_timesteps // 3
-    assert len(recorder.rollout_starts) == model._n_updates
-    assert recorder.training_started == recorder.training_ended == 1
-    # Continuing the run keeps counting exactly.
-    model.learn(500, reset_num_timesteps=False, callback=recorder)
-    assert model.num_timesteps == counter[0]
-    assert recorder.n_calls == model.num_timesteps // 3
-
-
-def test_last_generation_completed_and_budget_respected() -> None:
-    """learn(N) runs whole generations until at least N steps (Pendulum: fixed 800-step generations)."""
-    model = ARS("LinearPolicy", "Pendulum-v1", n_delta=2, seed=0)
-    model.learn(PENDULUM_GENERATION + 1)
-    assert model.num_timesteps == 2 * PENDULUM_GENERATION
-    assert model._n_updates == 2
-    model.learn(PENDULUM_GENERATION)
-    assert model.num_timesteps == PENDULUM_GENERATION
-
-
-@pytest.mark.parametrize("offset", [1, 6])
-def test_callback_stop_discards_interrupted_generation(offset: int) -> None:
-    counter = [0]
-    env = counting_env("CartPole-v1", 2, counter)
-    model = ARS("LinearPolicy", env, n_delta=2, seed=2)
-    # Stop on the `offset`-th vec step of the 3rd generation.
-    recorder = Recorder(stop_in_generation=3, offset=offset)
-    model.learn(100_000, callback=recorder)
-    assert len(recorder.rollout_starts) == 3
-    stop_at = recorder.rollout_starts[2] + offset
-    assert recorder.n_calls == stop_at
-    assert model.num_timesteps == stop_at * 2 == counter[0]
-    assert model._n_updates == 2
-    # Parameters (and observation statistics) are those of the last completed generation.
-    np.testing.assert_array_equal(model.policy.parameters_to_vector(), recorder.params_at_start[2])
-    np.testing.assert_array_equal(model.strategy.center.astype(np.float32), recorder.params_at_start[2])
-    assert model.policy.obs_count.item() == recorder.obs_count_at_start[2]
-    assert not np.array_equal(recorder.params_at_start[2], recorder.params_at_start[0])
-    assert recorder.training_ended == 1
-
-
-def test_callback_stop_on_last_step_of_a_generation_keeps_it() -> None:
-    model = ARS("LinearPolicy", "Pendulum-v1", n_delta=2, seed=0)
-    recorder = Recorder(stop_at=2 * PENDULUM_GENERATION)
-    model.learn(100_000, callback=recorder)
-    assert model.num_timesteps == 2 * PENDULUM_GENERATION
-    assert model._n_updates == 2  # the generation completed on that step: its update is applied
-    assert len(recorder.rollout_starts) == 2
-    assert not np.array_equal(model.policy.parameters_to_vector(), recorder.params_at_start[1])
-    np.testing.assert_array_equal(model.policy.parameters_to_vector(), model.strategy.center.astype(np.float32))
-
-
-def test_callback_stop_in_first_generation_keeps_initial_parameters() -> None:
-    model = ARS("LinearPolicy", "CartPole-v1", n_delta=2, seed=0, zero_policy=False)
-    initial = model.policy.parameters_to_vector()
-    model.learn(10_000, callback=Recorder(stop_at=7))
-    assert model.num_timesteps == 7
-    assert model._n_updates == 0
-    np.testing.assert_array_equal(model.policy.parameters_to_vector(), initial)
-    assert model.policy.obs_count.item() == pytest.approx(1e-4)
-
-
-def test_stop_training_on_max_episodes() -> None:
-    counter = [0]
-    env = counting_env("CartPole-v1", 2, counter)
-    model = ARS("LinearPolicy", env, n_delta=4, seed=0)
-    callback = StopTrainingOnMaxEpisodes(max_episodes=2)
-    model.learn(100_000, callback=callback)
-    assert callback.n_episodes >= 4  # 2 per env
-    assert model.num_timesteps == counter[0] < 2_000
-    assert model._n_updates == 0  # 8 candidates: the generation was interrupted
-    np.testing.assert_array_equal(model.policy.parameters_to_vector(), 0.0)
-
-
-def test_progress_bar() -> None:
-    model = ARS("LinearPolicy", "Pendulum-v1", n_delta=1, seed=0)
-    model.learn(400, progress_bar=True)
-    assert model.num_timesteps == 400
-
-
 # ---------------------------------------------------------------------------- logging
-def test_logger_csv_keys(tmp_path: Path) -> None:
+def test_logged_train_values(tmp_path: Path) -> None:
     model = ARS("LinearPolicy", "Pendulum-v1", n_delta=2, seed=0)
-    model.set_logger(configure(str(tmp_path), ["csv"]))
-    model.learn(2 * PENDULUM_GENERATION)
-    rows = read_csv(tmp_path / "progress.csv")
-    assert len(rows) == 2
-    required = {
-        "rollout/ep_rew_mean",
-        "rollout/ep_len_mean",
-        "time/fps",
-        "time/total_timesteps",
-        "time/iterations",
-        "train/step_size",
-        "train/delta_std",
-        "train/return_std",
-        "train/learning_rate",
-    }
-    assert required <= set(rows[0])
-    for row in rows:
-        assert all(row[key] != "" for key in required)
-    assert [int(r["time/total_timesteps"]) for r in rows] == [PENDULUM_GENERATION, 2 * PENDULUM_GENERATION]
-    assert [int(r["time/iterations"]) for r in rows] == [1, 2]
-    assert float(rows[0]["train/learning_rate"]) == pytest.approx(0.02)
-    assert float(rows[0]["train/delta_std"]) == pytest.approx(0.05)
-    assert float(rows[0]["rollout/ep_len_mean"]) == 200
-    # With one env and one episode per candidate, the first generation's episodes are the candidates'.
-    assert float(rows[0]["rollout/ep_rew_mean"]) == pytest.approx(float(rows[0]["rollout/candidate_return_mean"]))
-    assert float(rows[0]["train/return_std"]) > 0 and float(rows[0]["train/step_size"]) > 0
+    (row,) = learn_logged(model, PENDULUM_GENERATION, tmp_path)
+    assert all(row[f"train/{key}"] != "" for key in ("step_size", "delta_std", "return_std", "learning_rate"))
+    assert float(row["train/learning_rate"]) == pytest.approx(0.02)
+    assert float(row["train/delta_std"]) == pytest.approx(0.05)
+    assert float(row["train/return_std"]) > 0 and float(row["train/step_size"]) > 0
 
 
-def test_log_interval(tmp_path: Path) -> None:
-    model = ARS("LinearPolicy", "Pendulum-v1", n_delta=2, seed=0)
-    model.set_logger(configure(str(tmp_path), ["csv"]))
-    model.learn(4 * PENDULUM_GENERATION, log_interval=2)
-    rows = read_csv(tmp_path / "progress.csv")
-    assert [int(r["time/iterations"]) for r in rows] == [2, 4]
-
-
-def test_tensorboard_log(tmp_path: Path) -> None:
-    model = ARS("LinearPolicy", "Pendulum-v1", n_delta=1, seed=0, tensorboard_log=str(tmp_path))
-    model.learn(400)
-    run_dir = tmp_path / "ARS_ES_1"  # not sb3-contrib's "ARS_1"
-    assert run_dir.is_dir()
-    assert any(p.name.startswith("events.out.tfevents") and p.stat().st_size > 0 for p in run_dir.iterdir())
-    model.learn(400)  # a new run gets the next id
-    assert (tmp_path / "ARS_ES_2").is_dir()
+def test_tensorboard_run_name_is_not_sb3_contribs() -> None:
+    """Runs are named ``ARS_ES_<n>``, not sb3-contrib's ``ARS_<n>`` (runs of both can share a log folder)."""
+    assert inspect.signature(ARS.learn).parameters["tb_log_name"].default == "ARS_ES"
 
 
 # ---------------------------------------------------------------------------- hyperparameters
@@ -193,22 +47,13 @@ def test_schedules_are_applied(tmp_path: Path) -> None:
         delta_std=lambda progress: 0.05 * progress,
         seed=0,
     )
-    model.set_logger(configure(str(tmp_path), ["csv"]))
-    asked: list[tuple[float, np.ndarray, np.ndarray, np.ndarray]] = []
-    ask = model.strategy.ask
-
-    def spy() -> np.ndarray:
-        center = model.strategy.center.copy()
-        population = ask()
-        asked.append((model.strategy.delta_std, center, population, model.strategy._deltas.copy()))
-        return population
-
-    model.strategy.ask = spy  # type: ignore[method-assign]
-    model.learn(total)
-    rows = read_csv(tmp_path / "progress.csv")
+    asked = spy_on_ask(
+        model,
+        lambda strategy, population: (strategy.delta_std, strategy.center.copy(), population, strategy._deltas.copy()),
+    )
+    rows = learn_logged(model, total, tmp_path)
     assert len(rows) == 4
-    starts = [0] + [int(r["time/total_timesteps"]) for r in rows[:-1]]
-    progress = [1.0 - s / total for s in starts]
+    progress = progress_at_generation_starts(rows, total)
     np.testing.assert_allclose([float(r["train/learning_rate"]) for r in rows], [0.02 * p for p in progress])
     np.testing.assert_allclose([float(r["train/delta_std"]) for r in rows], [0.05 * p for p in progress])
     # The perturbations really use the scheduled noise.
@@ -296,21 +141,6 @@ def test_mlp_pendulum_vec_normalize() -> None:
     assert env.obs_rms.count > PENDULUM_GENERATION  # VecNormalize saw the training steps
     action, _ = model.predict(env.reset())
     assert action.shape == (2, 1)
-
-
-def test_dm_control_dict_observations() -> None:
-    shimmy = pytest.importorskip("shimmy")
-    gym.register_envs(shimmy)
-    env = make_vec_env("dm_control/walker-walk-v0", n_envs=1)
-    assert isinstance(env.observation_space, gym.spaces.Dict)
-    model = ARS("MlpPolicy", env, n_delta=1, seed=0, policy_kwargs=dict(net_arch=[16]))
-    assert model.policy.obs_dim == 24
-    model.learn(2 * 2 * 1000)
-    assert model._n_updates == 2
-    assert np.any(model.policy.parameters_to_vector() != 0.0)
-    assert model.policy.obs_count.item() == pytest.approx(4000 + 1e-4)
-    action, _ = model.predict(env.reset())
-    assert action.shape == (1, 6) and np.all(np.abs(action) <= 1.0)
 
 
 @pytest.mark.parametrize(("env_id", "n_envs"), [("Swimmer-v5", 1), ("BipedalWalker-v3", 2)])

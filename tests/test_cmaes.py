@@ -1,4 +1,8 @@
-"""CMA-ES as an SB3 algorithm: learning, step accounting, callbacks, logging, save/load, resume, pycma options."""
+"""What is specific to CMA-ES: logged values, pycma state in save/load and resume, private random state,
+covariance and population size, stop conditions and restarts, pycma options, errors.
+
+What every algorithm does (learning, step accounting, callbacks, logging) is in ``test_algorithms.py``.
+"""
 
 from __future__ import annotations
 
@@ -7,15 +11,13 @@ import warnings
 from pathlib import Path
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 import pytest
-from envs import ConstantObsEnv, GenerationRecorder, counting_env, read_csv
+from algorithms import check_resume, learn_logged, pendulum_env, spy_on_ask
+from envs import read_csv
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.env_util import make_vec_env
-from stable_baselines3.common.evaluation import evaluate_policy
 from stable_baselines3.common.logger import configure
-from stable_baselines3.common.vec_env import DummyVecEnv
 from torch import nn
 
 from sb3_es import CMAES
@@ -33,10 +35,6 @@ WALKER_KWARGS = dict(net_arch=[40, 40], activation_fn=nn.Tanh)
 QUICK_STOP = {"tolfun": 1e3, "tolfunhist": 1e3}
 
 
-def pendulum_env() -> DummyVecEnv:
-    return make_vec_env("Pendulum-v1", n_envs=1)
-
-
 def pendulum_model(**kwargs: Any) -> CMAES:
     return CMAES("LinearPolicy", pendulum_env(), **{"seed": 0, **kwargs})
 
@@ -49,15 +47,7 @@ def covariance(strategy: CMAESStrategy) -> np.ndarray:
 
 def spy_on_population_sizes(model: CMAES) -> list[tuple[int, float]]:
     """Record (population size, sigma) of every generation asked."""
-    asked: list[tuple[int, float]] = []
-    ask = model.strategy.ask
-
-    def spy() -> np.ndarray:
-        asked.append((model.strategy.population_size, model.strategy.sigma))
-        return ask()
-
-    model.strategy.ask = spy  # type: ignore[method-assign]
-    return asked
+    return spy_on_ask(model, lambda strategy, _: (strategy.population_size, strategy.sigma))
 
 
 def assert_same_cma_state(a: CMAES, b: CMAES) -> None:
@@ -71,117 +61,23 @@ def assert_same_cma_state(a: CMAES, b: CMAES) -> None:
     np.testing.assert_array_equal(a.strategy.ask(), b.strategy.ask())
 
 
-# ---------------------------------------------------------------------------- learning
-def test_learns_cartpole() -> None:
-    """
-    Budget: 50,000 steps (about 3 s on 2 CPU cores; pycma's stop conditions may end the run earlier). With
-    these settings 14 of the seeds 0-15 reach a mean return >= 475 (seeds 1 and 6: 467 and 473); the test
-    uses seed 0.
-    """
-    model = CMAES("LinearPolicy", "CartPole-v1", sigma=0.5, n_eval_episodes=2, seed=0)
-    model.learn(50_000)
-    eval_env = make_vec_env("CartPole-v1", n_envs=1, seed=123)
-    mean_return, _ = evaluate_policy(model, eval_env, n_eval_episodes=10, deterministic=True)
-    assert mean_return >= 475
-
-
-# ---------------------------------------------------------------------------- step accounting and callbacks
-def test_exact_timestep_count() -> None:
-    counter = [0]
-    env = counting_env("CartPole-v1", 3, counter)
-    model = CMAES("LinearPolicy", env, population_size=6, n_eval_episodes=2, seed=1)
-    recorder = GenerationRecorder()
-    model.learn(1500, callback=recorder)
-    assert model.num_timesteps >= 1500
-    assert model.num_timesteps == counter[0]
-    assert model.num_timesteps % 3 == 0
-    assert recorder.n_calls == model.num_timesteps // 3  # on_step once per vec step
-    assert len(recorder.rollout_starts) == model._n_updates == model.strategy.es.countiter
-    assert recorder.training_started == recorder.training_ended == 1
-    model.learn(500, reset_num_timesteps=False, callback=recorder)
-    assert model.num_timesteps == counter[0]
-    assert recorder.n_calls == model.num_timesteps // 3
-
-
-@pytest.mark.parametrize("offset", [1, 6])
-def test_callback_stop_discards_interrupted_generation(offset: int) -> None:
-    counter = [0]
-    env = counting_env("CartPole-v1", 2, counter)
-    model = CMAES("LinearPolicy", env, population_size=4, seed=2)
-    recorder = GenerationRecorder(stop_in_generation=3, offset=offset)
-    model.learn(100_000, callback=recorder)
-    assert len(recorder.rollout_starts) == 3
-    stop_at = recorder.rollout_starts[2] + offset
-    assert recorder.n_calls == stop_at  # stopped within that very vec step
-    assert model.num_timesteps == stop_at * 2 == counter[0]
-    assert model._n_updates == 2
-    assert model.strategy.es.countiter == 2  # pycma was not told the interrupted generation
-    np.testing.assert_array_equal(model.policy.parameters_to_vector(), recorder.params_at_start[2])
-    np.testing.assert_array_equal(model.strategy.center.astype(np.float32), recorder.params_at_start[2])
-    assert model.policy.obs_count.item() == recorder.obs_count_at_start[2]
-    assert not np.array_equal(recorder.params_at_start[2], recorder.params_at_start[0])
-    assert recorder.training_ended == 1
-    model.learn(1, reset_num_timesteps=False)  # training goes on with a fresh ask()
-    assert model._n_updates == model.strategy.es.countiter == 3
-
-
-def test_progress_bar() -> None:
-    model = pendulum_model()
-    model.learn(PENDULUM_GENERATION, progress_bar=True)
-    assert model.num_timesteps == PENDULUM_GENERATION
-
-
 # ---------------------------------------------------------------------------- logging
-def test_logger_csv_keys(tmp_path: Path) -> None:
+def test_logged_train_values(tmp_path: Path) -> None:
     model = pendulum_model()
-    model.set_logger(configure(str(tmp_path), ["csv"]))
-    model.learn(2 * PENDULUM_GENERATION)
-    rows = read_csv(tmp_path / "progress.csv")
-    assert len(rows) == 2
-    required = {
-        "rollout/ep_rew_mean",
-        "time/fps",
-        "time/total_timesteps",
-        "time/iterations",
-        "train/sigma",
-        "train/population_size",
-        "rollout/candidate_return_max",
-        "rollout/candidate_return_mean",
-    }
-    assert required <= set(rows[0])
-    for row in rows:
-        assert all(row[key] != "" for key in required)
+    rows = learn_logged(model, 2 * PENDULUM_GENERATION, tmp_path)
+    assert all(row[f"train/{key}"] != "" for key in ("sigma", "population_size") for row in rows)
     assert not any(key.startswith("train/stop_") for key in rows[0])
-    assert [int(r["time/total_timesteps"]) for r in rows] == [PENDULUM_GENERATION, 2 * PENDULUM_GENERATION]
-    assert [int(r["time/iterations"]) for r in rows] == [1, 2]
     assert [float(r["train/population_size"]) for r in rows] == [PENDULUM_POPULATION] * 2
     assert float(rows[-1]["train/sigma"]) == pytest.approx(model.strategy.es.sigma)
-    assert float(rows[0]["rollout/ep_rew_mean"]) == pytest.approx(float(rows[0]["rollout/candidate_return_mean"]))
-
-
-def test_tensorboard_log(tmp_path: Path) -> None:
-    model = pendulum_model(tensorboard_log=str(tmp_path))
-    model.learn(PENDULUM_GENERATION)
-    run_dir = tmp_path / "CMAES_1"
-    assert run_dir.is_dir()
-    assert any(p.name.startswith("events.out.tfevents") and p.stat().st_size > 0 for p in run_dir.iterdir())
-    model.learn(PENDULUM_GENERATION)
-    assert (tmp_path / "CMAES_2").is_dir()
 
 
 # ---------------------------------------------------------------------------- save / load / resume
-def test_save_load_round_trip(tmp_path: Path) -> None:
+def test_save_load_restores_the_pycma_state(tmp_path: Path) -> None:
     model = CMAES("MlpPolicy", pendulum_env(), sigma=0.2, population_size=6, seed=0, policy_kwargs=dict(net_arch=[8]))
     model.learn(2 * 6 * 200)
-    assert model.policy.obs_count.item() > 1
     model.save(tmp_path / "model.zip")
     loaded = CMAES.load(tmp_path / "model.zip")
-    obs = np.random.default_rng(0).uniform(-1, 1, (16, 3)).astype(np.float32)
-    np.testing.assert_array_equal(loaded.predict(obs)[0], model.predict(obs)[0])
-    np.testing.assert_array_equal(loaded.policy.parameters_to_vector(), model.policy.parameters_to_vector())
     assert (loaded.sigma, loaded.population_size, loaded.diagonal, loaded.restarts) == (0.2, 6, "auto", None)
-    assert loaded.num_timesteps == model.num_timesteps
-    # The pycma state comes back too.
     np.testing.assert_array_equal(loaded.strategy.es.mean, model.strategy.es.mean)
     assert loaded.strategy.es.sigma == model.strategy.es.sigma
     np.testing.assert_array_equal(covariance(loaded.strategy), covariance(model.strategy))
@@ -200,33 +96,12 @@ def test_loaded_strategy_asks_what_the_saved_one_would(tmp_path: Path) -> None:
     np.testing.assert_array_equal(CMAES.load(tmp_path / "b.zip").strategy.ask(), expected)
 
 
-@pytest.mark.parametrize("n", [PENDULUM_GENERATION, 2 * PENDULUM_GENERATION])
-def test_resume_is_identical_to_an_uninterrupted_run(tmp_path: Path, n: int) -> None:
-    straight = pendulum_model(seed=3)
-    straight.learn(2 * n)
-
-    first = pendulum_model(seed=3)
-    first.learn(n)
-    first.save(tmp_path / "half.zip")
-    np.random.seed(123)  # the global random state must not matter
-    resumed = CMAES.load(tmp_path / "half.zip", env=pendulum_env())
-    np.random.rand(10)
-    resumed.learn(n, reset_num_timesteps=False)
-
-    assert resumed.num_timesteps == straight.num_timesteps == 2 * n
-    assert resumed._n_updates == straight._n_updates
+def test_resume_restores_the_pycma_state(tmp_path: Path) -> None:
+    """The generic check (``test_save_load.py``), then pycma's own state: mean, step size, covariance, iterations."""
+    straight, resumed = check_resume(
+        lambda env: CMAES("LinearPolicy", env, seed=3), pendulum_env, PENDULUM_GENERATION, tmp_path / "half.zip"
+    )
     assert_same_cma_state(straight, resumed)
-    assert not np.array_equal(first.strategy.es.mean, straight.strategy.es.mean)
-
-
-def test_in_memory_continuation_is_identical_to_an_uninterrupted_run() -> None:
-    """learn(2N) and learn(N) + learn(N, reset_num_timesteps=False) on the same object, no save."""
-    straight = pendulum_model(seed=3)
-    straight.learn(2 * PENDULUM_GENERATION)
-    split = pendulum_model(seed=3)
-    split.learn(PENDULUM_GENERATION)
-    split.learn(PENDULUM_GENERATION, reset_num_timesteps=False)
-    assert_same_cma_state(straight, split)
 
 
 class GlobalRandomUser(BaseCallback):
@@ -463,41 +338,6 @@ def test_bad_diagonal_and_restarts() -> None:
         CMAES("LinearPolicy", "Pendulum-v1", diagonal="yes")
     with pytest.raises(ValueError, match="restarts"):
         CMAES("LinearPolicy", "Pendulum-v1", restarts="lpop")  # type: ignore[arg-type]
-
-
-def test_nan_rewards_name_the_candidates_and_leave_parameters_unchanged() -> None:
-    """Constant observation 1: a candidate's action has the sign of its weight, NaN reward when positive."""
-    model = CMAES("LinearPolicy", DummyVecEnv([ConstantObsEnv]), population_size=8, zero_policy=True, seed=0)
-    asked: list[np.ndarray] = []
-    ask = model.strategy.ask
-    model.strategy.ask = lambda: asked.append(ask()) or asked[-1]  # type: ignore[method-assign]
-    mean, sigma = model.strategy.es.mean.copy(), model.strategy.es.sigma
-    with pytest.raises(ValueError, match="candidate") as info:
-        model.learn(100)
-    bad = np.flatnonzero(asked[0][:, 0] > 0).tolist()
-    assert 0 < len(bad) < 8
-    assert str(bad) in str(info.value)
-    np.testing.assert_array_equal(model.policy.parameters_to_vector(), 0.0)
-    np.testing.assert_array_equal(model.strategy.center, 0.0)
-    np.testing.assert_array_equal(model.strategy.es.mean, mean)
-    assert model.strategy.es.sigma == sigma and model.strategy.es.countiter == 0
-    assert model.policy.obs_count.item() == pytest.approx(1e-4)
-    assert model._n_updates == 0
-
-
-# ---------------------------------------------------------------------------- environments
-def test_dm_control_walker_walk() -> None:
-    shimmy = pytest.importorskip("shimmy")
-    gym.register_envs(shimmy)
-    env = make_vec_env("dm_control/walker-walk-v0", n_envs=1)
-    model = CMAES("MlpPolicy", env, population_size=4, seed=0, policy_kwargs=dict(net_arch=[16]))
-    initial = model.policy.parameters_to_vector()
-    model.learn(1)
-    assert model._n_updates == 1
-    assert model.num_timesteps == 4 * 1000
-    assert not np.array_equal(model.policy.parameters_to_vector(), initial)
-    action, _ = model.predict(env.reset())
-    assert action.shape == (1, 6) and np.all(np.abs(action) <= 1.0)
 
 
 def test_no_learning_rate() -> None:

@@ -1,4 +1,5 @@
-"""Clear errors for bad hyperparameters, unsupported environments and non-finite returns."""
+"""Clear errors for bad hyperparameters, unsupported environments and save files (non-finite returns of every
+algorithm: ``test_algorithms.py``)."""
 
 from __future__ import annotations
 
@@ -13,10 +14,9 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import torch as th
-from envs import ConstantObsEnv, MultiDiscreteActionEnv, NaNRewardWrapper
-from stable_baselines3.common.env_util import make_vec_env
+from algorithms import ALGORITHMS, POPULATION_ALGORITHMS, Algo
+from envs import MultiDiscreteActionEnv
 from stable_baselines3.common.policies import BasePolicy
-from stable_baselines3.common.vec_env import DummyVecEnv
 
 from sb3_es import ARS, CMAES, REINFORCE, OpenES
 
@@ -63,20 +63,23 @@ def test_delta_std_schedule_reaching_zero_during_training() -> None:
 
 
 # ---------------------------------------------------------------------------- environments and policies
-def test_unknown_env_id() -> None:
+@pytest.mark.parametrize("algo", ALGORITHMS)
+def test_unknown_env_id(algo: Algo) -> None:
     with pytest.raises(gym.error.Error, match="NoSuchEnvAtAll"):
-        ARS("LinearPolicy", "NoSuchEnvAtAll-v0")
+        algo.make("NoSuchEnvAtAll-v0", 2)
 
 
-def test_multi_discrete_action_env() -> None:
+@pytest.mark.parametrize("algo", ALGORITHMS)
+def test_multi_discrete_action_env(algo: Algo) -> None:
     with pytest.raises(ValueError, match="MultiDiscrete") as info:
-        ARS("LinearPolicy", MultiDiscreteActionEnv())
+        algo.make(MultiDiscreteActionEnv(), 2)
     assert "action space" in str(info.value)
 
 
-def test_unknown_policy_alias() -> None:
+@pytest.mark.parametrize("algo", ALGORITHMS)
+def test_unknown_policy_alias(algo: Algo) -> None:
     with pytest.raises(ValueError, match="CnnPolicy"):
-        ARS("CnnPolicy", "Pendulum-v1")
+        algo.make("Pendulum-v1", 2, policy="CnnPolicy")
 
 
 class NotFlatPolicy(BasePolicy):
@@ -89,63 +92,6 @@ class NotFlatPolicy(BasePolicy):
 def test_non_flat_policy_class() -> None:
     with pytest.raises(TypeError, match="FlatPolicy"):
         ARS(NotFlatPolicy, "Pendulum-v1")
-
-
-# ---------------------------------------------------------------------------- non-finite returns
-def spy_on_ask(model: ARS) -> list[np.ndarray]:
-    asked: list[np.ndarray] = []
-    ask = model.strategy.ask
-
-    def spy() -> np.ndarray:
-        population = ask()
-        asked.append(population)
-        return population
-
-    model.strategy.ask = spy  # type: ignore[method-assign]
-    return asked
-
-
-def snapshot(model: ARS) -> dict[str, np.ndarray]:
-    return dict(
-        params=model.policy.parameters_to_vector(),
-        center=model.strategy.center.copy(),
-        obs_mean=model.policy.obs_mean.numpy().copy(),
-        obs_var=model.policy.obs_var.numpy().copy(),
-        obs_count=model.policy.obs_count.numpy().copy(),
-    )
-
-
-def assert_unchanged(before: dict[str, np.ndarray], model: ARS) -> None:
-    after = snapshot(model)
-    for key, value in before.items():
-        np.testing.assert_array_equal(after[key], value, err_msg=key)
-
-
-def test_nan_rewards_for_some_candidates() -> None:
-    """Constant observation 1: a candidate's action has the sign of its weight, NaN reward when positive."""
-    model = ARS("LinearPolicy", DummyVecEnv([ConstantObsEnv]), n_delta=3, seed=0, zero_policy=False)
-    asked = spy_on_ask(model)
-    before = snapshot(model)
-    with pytest.raises(ValueError, match="candidate") as info:
-        model.learn(100)
-    population = asked[0]
-    bad = np.flatnonzero(population[:, 0] > 0).tolist()
-    assert 0 < len(bad) < len(population)
-    assert str(bad) in str(info.value)
-    assert_unchanged(before, model)
-    assert model._n_updates == 0
-
-
-def test_nan_rewards_after_training_leave_last_update() -> None:
-    model = ARS("LinearPolicy", make_vec_env("Pendulum-v1", n_envs=1), n_delta=2, seed=0)
-    model.learn(800)
-    assert model._n_updates == 1
-    before = snapshot(model)
-    model.set_env(make_vec_env("Pendulum-v1", n_envs=1, wrapper_class=NaNRewardWrapper))
-    with pytest.raises(ValueError, match=re.escape("candidate(s) [0, 1, 2, 3]")):
-        model.learn(800, reset_num_timesteps=False)
-    assert_unchanged(before, model)
-    assert model._n_updates == 1
 
 
 # ---------------------------------------------------------------------------- schedules during training
@@ -223,18 +169,17 @@ def test_cmaes_full_covariance_too_large_for_memory() -> None:
         CMAES("MlpPolicy", "Pendulum-v1", diagonal=False, policy_kwargs=dict(net_arch=[1024, 1024]))
 
 
-@pytest.mark.parametrize("algorithm", [ARS, OpenES, CMAES, REINFORCE])
+@pytest.mark.parametrize("algo", ALGORITHMS)
 @pytest.mark.parametrize("seed", [-1, 2**32, 1.5])
-def test_seed_out_of_range(algorithm, seed: float) -> None:
-    policy = "MlpPolicy" if algorithm is REINFORCE else "LinearPolicy"
+def test_seed_out_of_range(algo: Algo, seed: float) -> None:
     with pytest.raises(ValueError, match=re.escape(f"seed={seed!r}: it must be an integer in [0, 2**32 - 1]")):
-        algorithm(policy, "Pendulum-v1", seed=seed)
+        algo.make("Pendulum-v1", 2, seed=seed)
 
 
-@pytest.mark.parametrize("algorithm", [ARS, OpenES, CMAES])
-def test_population_policy_given_actor_critic_net_arch(algorithm) -> None:
+@pytest.mark.parametrize("algo", POPULATION_ALGORITHMS)
+def test_population_policy_given_actor_critic_net_arch(algo: Algo) -> None:
     with pytest.raises(ValueError, match=r"net_arch=\{'pi': \[32\], 'vf': \[32\]\}: .*no value network.*\[64, 64\]"):
-        algorithm("MlpPolicy", "Pendulum-v1", policy_kwargs=dict(net_arch=dict(pi=[32], vf=[32])))
+        algo.make("Pendulum-v1", 2, policy="MlpPolicy", policy_kwargs=dict(net_arch=dict(pi=[32], vf=[32])))
 
 
 # ---------------------------------------------------------------------------- save files
@@ -263,17 +208,16 @@ def garble_action_space(path: Path) -> Path:
     return garbled
 
 
-@pytest.mark.parametrize("algorithm", [ARS, REINFORCE])
-def test_load_with_custom_objects_does_not_warn(tmp_path: Path, algorithm) -> None:
-    policy = "MlpPolicy" if algorithm is REINFORCE else "LinearPolicy"
-    original = algorithm(policy, "Pendulum-v1", seed=0)
+@pytest.mark.parametrize("algo", ALGORITHMS)
+def test_load_with_custom_objects_does_not_warn(tmp_path: Path, algo: Algo) -> None:
+    original = algo.make("Pendulum-v1", 2)
     original.save(tmp_path / "model.zip")
     garbled = garble_action_space(tmp_path / "model.zip")
     with pytest.warns(UserWarning, match="Could not deserialize object action_space"), pytest.raises(KeyError):
-        algorithm.load(garbled)  # SB3 needs the action space
+        algo.cls.load(garbled)  # SB3 needs the action space
     with warnings.catch_warnings():
         warnings.filterwarnings("error", message="Could not deserialize")
-        model = algorithm.load(garbled, custom_objects={"action_space": original.action_space})
+        model = algo.cls.load(garbled, custom_objects={"action_space": original.action_space})
     obs = np.zeros((4, 3), dtype=np.float32)
     np.testing.assert_array_equal(
         model.predict(obs, deterministic=True)[0], original.predict(obs, deterministic=True)[0]

@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import inspect
 from pathlib import Path
 
 import numpy as np
 import pytest
+from algorithms import ALGOS, Algo, check_resume
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.evaluation import evaluate_policy
 
@@ -34,31 +36,30 @@ def test_openes_antithetic_pairs_from_the_table() -> None:
     np.testing.assert_allclose(dense[:3] - center, center - dense[3:], rtol=0, atol=1e-12)
 
 
-@pytest.mark.parametrize("algo", [ARS, OpenES])
-def test_learns_cartpole_with_a_noise_table(algo: type) -> None:
-    kwargs = dict(n_delta=2) if algo is ARS else dict(population_size=16, sigma=0.5, learning_rate=0.1)
-    model = algo("LinearPolicy", "CartPole-v1", seed=0, noise_table_size=100_000, **kwargs)
-    model.learn(50_000)
+#: The algorithms that can read their perturbations from a noise table.
+NOISE_TABLE_ALGORITHMS = [
+    pytest.param(algo, id=algo.name) for algo in ALGOS if "noise_table_size" in inspect.signature(algo.cls).parameters
+]
+
+
+@pytest.mark.parametrize("algo", NOISE_TABLE_ALGORITHMS)
+def test_learns_cartpole_with_a_noise_table(algo: Algo) -> None:
+    model = algo.cls(algo.policy, "CartPole-v1", seed=0, noise_table_size=100_000, **algo.cartpole)
+    model.learn(algo.cartpole_steps)
     mean, _ = evaluate_policy(model, make_vec_env("CartPole-v1", n_envs=1, seed=123), n_eval_episodes=10)
     assert mean >= 475
 
 
-def test_resume_with_a_noise_table_is_exact(tmp_path: Path) -> None:
-    generation = 2 * 2 * 200  # n_delta=2, Pendulum's 200-step episodes, one env
-
-    def make() -> ARS:
-        env = make_vec_env("Pendulum-v1", n_envs=1, seed=0)
-        return ARS("LinearPolicy", env, n_delta=2, noise_table_size=50_000, seed=5)
-
-    straight = make()
-    straight.learn(4 * generation)
-    resumed = make()
-    resumed.learn(2 * generation)
-    resumed.save(tmp_path / "model.zip")
-    loaded = ARS.load(tmp_path / "model.zip", env=make_vec_env("Pendulum-v1", n_envs=1, seed=0))
-    loaded.learn(2 * generation, reset_num_timesteps=False)
-    np.testing.assert_array_equal(loaded.policy.parameters_to_vector(), straight.policy.parameters_to_vector())
-    np.testing.assert_array_equal(loaded.strategy.center, straight.strategy.center)
+@pytest.mark.parametrize("algo", NOISE_TABLE_ALGORITHMS)
+def test_resume_with_a_noise_table_is_exact(algo: Algo, tmp_path: Path) -> None:
+    generation = 4 * 200  # 4 candidates, Pendulum's 200-step episodes, one env
+    straight, resumed = check_resume(
+        lambda env: algo.make(env, 4, noise_table_size=50_000, seed=5),
+        lambda: make_vec_env("Pendulum-v1", n_envs=1, seed=0),
+        generation,
+        tmp_path / "model.zip",
+    )
+    np.testing.assert_array_equal(resumed.strategy.center, straight.strategy.center)
 
 
 def test_bad_noise_table_size() -> None:

@@ -1,15 +1,26 @@
-"""OpenES as an SB3 algorithm: learning, step accounting, callbacks, logging, save/load, resume, features, errors."""
+"""What is specific to OpenES: logged values, save/load of its options, sampling, fitness shaping, optimizers, decays,
+best tracking, errors.
+
+What every algorithm does (learning, step accounting, callbacks, logging) is in ``test_algorithms.py``.
+"""
 
 from __future__ import annotations
 
 from pathlib import Path
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 import pytest
 import torch as th
-from envs import ConstantObsEnv, GenerationRecorder, ToyEnv, counting_env, read_csv, rollout
+from algorithms import (
+    assert_identical,
+    check_resume,
+    learn_logged,
+    pendulum_env,
+    progress_at_generation_starts,
+    spy_on_ask,
+)
+from envs import ToyEnv, read_csv, rollout
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.evaluation import evaluate_policy
 from stable_baselines3.common.logger import configure
@@ -23,28 +34,13 @@ POPULATION = 4
 PENDULUM_GENERATION = POPULATION * 200  # Pendulum-v1: fixed 200-step episodes, one env
 
 
-def pendulum_env() -> DummyVecEnv:
-    return make_vec_env("Pendulum-v1", n_envs=1)
-
-
 def pendulum_model(**kwargs: Any) -> OpenES:
-    kwargs = {"population_size": POPULATION, "seed": 0, **kwargs}
-    return OpenES("LinearPolicy", pendulum_env(), **kwargs)
+    return OpenES("LinearPolicy", pendulum_env(), **{"population_size": POPULATION, "seed": 0, **kwargs})
 
 
-def spy_on_ask(model: OpenES) -> list[tuple[np.ndarray, float, np.ndarray]]:
+def spy_on_sigma(model: OpenES) -> list[tuple[np.ndarray, float, np.ndarray]]:
     """Record (center, sigma, population) at every ask()."""
-    asked: list[tuple[np.ndarray, float, np.ndarray]] = []
-    ask = model.strategy.ask
-
-    def spy() -> np.ndarray:
-        center = model.strategy.center.copy()
-        population = ask()
-        asked.append((center, model.strategy.sigma, population.copy()))
-        return population
-
-    model.strategy.ask = spy  # type: ignore[method-assign]
-    return asked
+    return spy_on_ask(model, lambda strategy, population: (strategy.center.copy(), strategy.sigma, population))
 
 
 def adam_state(model: OpenES) -> dict[str, np.ndarray]:
@@ -68,174 +64,52 @@ def assert_same_strategy_state(a: OpenES, b: OpenES) -> None:
     assert a.strategy.best_fitness == b.strategy.best_fitness
 
 
-# ---------------------------------------------------------------------------- learning
-def test_learns_cartpole() -> None:
-    """
-    Budget: 50,000 steps (about 3 s on 2 CPU cores). With these settings 15 of the seeds 0-15 reach a mean
-    return >= 475 within the budget (seed 14: 385); the test uses seed 0.
-    """
-    model = OpenES("LinearPolicy", "CartPole-v1", population_size=16, sigma=0.5, learning_rate=0.1, seed=0)
-    model.learn(50_000)
-    assert 50_000 <= model.num_timesteps < 50_000 + 16 * 500
-    eval_env = make_vec_env("CartPole-v1", n_envs=1, seed=123)
-    mean_return, _ = evaluate_policy(model, eval_env, n_eval_episodes=10, deterministic=True)
-    assert mean_return >= 475
-
-
-# ---------------------------------------------------------------------------- step accounting and callbacks
-def test_exact_timestep_count() -> None:
-    counter = [0]
-    env = counting_env("CartPole-v1", 3, counter)
-    model = OpenES("LinearPolicy", env, population_size=6, n_eval_episodes=2, seed=1)
-    recorder = GenerationRecorder()
-    model.learn(1500, callback=recorder)
-    assert model.num_timesteps >= 1500
-    assert model.num_timesteps == counter[0]
-    assert model.num_timesteps % 3 == 0
-    assert recorder.n_calls == model.num_timesteps // 3  # on_step once per vec step
-    assert len(recorder.rollout_starts) == model._n_updates
-    assert recorder.training_started == recorder.training_ended == 1
-    model.learn(500, reset_num_timesteps=False, callback=recorder)
-    assert model.num_timesteps == counter[0]
-    assert recorder.n_calls == model.num_timesteps // 3
-
-
-@pytest.mark.parametrize("offset", [1, 6])
-def test_callback_stop_discards_interrupted_generation(offset: int) -> None:
-    counter = [0]
-    env = counting_env("CartPole-v1", 2, counter)
-    model = OpenES("LinearPolicy", env, population_size=4, seed=2)
-    recorder = GenerationRecorder(stop_in_generation=3, offset=offset)
-    model.learn(100_000, callback=recorder)
-    assert len(recorder.rollout_starts) == 3
-    stop_at = recorder.rollout_starts[2] + offset
-    assert recorder.n_calls == stop_at  # stopped within that very vec step
-    assert model.num_timesteps == stop_at * 2 == counter[0]
-    assert model._n_updates == 2
-    # The parameters, the optimizer and the observation statistics are those of the last completed update.
-    np.testing.assert_array_equal(model.policy.parameters_to_vector(), recorder.params_at_start[2])
-    np.testing.assert_array_equal(model.strategy.center.astype(np.float32), recorder.params_at_start[2])
-    assert int(adam_state(model)["step"]) == 2
-    assert model.policy.obs_count.item() == recorder.obs_count_at_start[2]
-    assert not np.array_equal(recorder.params_at_start[2], recorder.params_at_start[0])
-    assert recorder.training_ended == 1
-    # Training can go on afterwards.
-    model.learn(1, reset_num_timesteps=False)
-    assert model._n_updates == 3
-
-
-def test_callback_stop_in_first_generation_keeps_initial_parameters() -> None:
-    model = OpenES("LinearPolicy", "CartPole-v1", population_size=4, seed=0)
-    initial = model.policy.parameters_to_vector()
-    model.learn(10_000, callback=GenerationRecorder(stop_at=7))
-    assert model.num_timesteps == 7
-    assert model._n_updates == 0
-    np.testing.assert_array_equal(model.policy.parameters_to_vector(), initial)
-    assert adam_state(model) == {}
-
-
-def test_progress_bar() -> None:
-    model = pendulum_model()
-    model.learn(PENDULUM_GENERATION, progress_bar=True)
-    assert model.num_timesteps == PENDULUM_GENERATION
-
-
 # ---------------------------------------------------------------------------- logging
-def test_logger_csv_keys(tmp_path: Path) -> None:
+def test_logged_train_values(tmp_path: Path) -> None:
     model = pendulum_model()
-    model.set_logger(configure(str(tmp_path), ["csv"]))
-    model.learn(2 * PENDULUM_GENERATION)
-    rows = read_csv(tmp_path / "progress.csv")
-    assert len(rows) == 2
-    required = {
-        "rollout/ep_rew_mean",
-        "time/fps",
-        "time/total_timesteps",
-        "time/iterations",
-        "train/sigma",
-        "train/learning_rate",
-        "train/best_fitness",
-        "rollout/candidate_return_max",
-        "rollout/candidate_return_mean",
-    }
-    assert required <= set(rows[0])
-    for row in rows:
-        assert all(row[key] != "" for key in required)
-    assert [int(r["time/total_timesteps"]) for r in rows] == [PENDULUM_GENERATION, 2 * PENDULUM_GENERATION]
-    assert [int(r["time/iterations"]) for r in rows] == [1, 2]
-    assert float(rows[0]["train/sigma"]) == pytest.approx(0.1)
-    assert float(rows[0]["train/learning_rate"]) == pytest.approx(0.01)
-    # One env, one episode per candidate: the first generation's episodes are the candidates'.
-    assert float(rows[0]["rollout/ep_rew_mean"]) == pytest.approx(float(rows[0]["rollout/candidate_return_mean"]))
-    assert float(rows[0]["train/best_fitness"]) == pytest.approx(float(rows[0]["rollout/candidate_return_max"]))
-
-
-def test_tensorboard_log(tmp_path: Path) -> None:
-    model = pendulum_model(tensorboard_log=str(tmp_path))
-    model.learn(PENDULUM_GENERATION)
-    run_dir = tmp_path / "OpenES_1"
-    assert run_dir.is_dir()
-    assert any(p.name.startswith("events.out.tfevents") and p.stat().st_size > 0 for p in run_dir.iterdir())
-    model.learn(PENDULUM_GENERATION)
-    assert (tmp_path / "OpenES_2").is_dir()
+    (row,) = learn_logged(model, PENDULUM_GENERATION, tmp_path)
+    assert all(row[f"train/{key}"] != "" for key in ("sigma", "learning_rate", "best_fitness"))
+    assert float(row["train/sigma"]) == pytest.approx(0.1)
+    assert float(row["train/learning_rate"]) == pytest.approx(0.01)
+    assert float(row["train/best_fitness"]) == pytest.approx(float(row["rollout/candidate_return_max"]))
 
 
 # ---------------------------------------------------------------------------- save / load / resume
-def test_save_load_round_trip(tmp_path: Path) -> None:
-    model = OpenES(
-        "MlpPolicy",
-        pendulum_env(),
-        population_size=POPULATION,
-        sigma=0.05,
-        optimizer="sgd",
-        seed=0,
-        policy_kwargs=dict(net_arch=[8]),
-    )
+def test_sgd_optimizer_comes_back_from_a_save(tmp_path: Path) -> None:
+    model = pendulum_model(sigma=0.05, optimizer="sgd", momentum=0.5)
     model.learn(PENDULUM_GENERATION)
-    assert model.policy.obs_count.item() > 1
     model.save(tmp_path / "model.zip")
     loaded = OpenES.load(tmp_path / "model.zip")
-    obs = np.random.default_rng(0).uniform(-1, 1, (16, 3)).astype(np.float32)
-    np.testing.assert_array_equal(loaded.predict(obs)[0], model.predict(obs)[0])
-    np.testing.assert_array_equal(loaded.policy.parameters_to_vector(), model.policy.parameters_to_vector())
-    assert (loaded.population_size, loaded.sigma, loaded.optimizer) == (POPULATION, 0.05, "sgd")
     assert isinstance(loaded.strategy.optimizer, th.optim.SGD)
-    assert loaded.num_timesteps == model.num_timesteps
-    np.testing.assert_array_equal(loaded.strategy.ask(), model.strategy.ask())
+    assert loaded.strategy.optimizer.param_groups[0]["momentum"] == 0.5
+    assert_identical(loaded.strategy.optimizer.state_dict(), model.strategy.optimizer.state_dict())
 
 
 @pytest.mark.parametrize(
     ("n", "kwargs"),
     [
         (PENDULUM_GENERATION, {}),
-        (2 * PENDULUM_GENERATION, {}),
         (2 * PENDULUM_GENERATION, dict(sigma_decay=0.8, learning_rate_decay=0.9, learning_rate=0.05)),
     ],
 )
-def test_resume_is_identical_to_an_uninterrupted_run(tmp_path: Path, n: int, kwargs: dict[str, Any]) -> None:
-    straight = pendulum_model(seed=3, **kwargs)
-    straight.learn(2 * n)
-
-    first = pendulum_model(seed=3, **kwargs)
-    first.learn(n)
-    first.save(tmp_path / "half.zip")
-    resumed = OpenES.load(tmp_path / "half.zip", env=pendulum_env())
-    resumed.learn(n, reset_num_timesteps=False)
-
-    assert resumed.num_timesteps == straight.num_timesteps == 2 * n
-    assert resumed._n_updates == straight._n_updates
+def test_resume_restores_the_strategy_state(tmp_path: Path, n: int, kwargs: dict[str, Any]) -> None:
+    """The generic check (``test_save_load.py``), then OpenES's own state: Adam's moments, best candidate, decays."""
+    straight, resumed = check_resume(
+        lambda env: OpenES("LinearPolicy", env, population_size=POPULATION, seed=3, **kwargs),
+        pendulum_env,
+        n,
+        tmp_path / "half.zip",
+    )
     assert_same_strategy_state(straight, resumed)
     assert straight.strategy.sigma == resumed.strategy.sigma
     assert straight.strategy.learning_rate == resumed.strategy.learning_rate
     np.testing.assert_array_equal(straight.strategy.ask(), resumed.strategy.ask())
-    # Sanity: training did move the parameters, so equality is not trivial.
-    assert not np.array_equal(first.strategy.center, straight.strategy.center)
 
 
 # ---------------------------------------------------------------------------- sampling and fitness shaping
 def test_antithetic_candidates_are_mirrored_about_the_center() -> None:
     model = pendulum_model(population_size=6)
-    asked = spy_on_ask(model)
+    asked = spy_on_sigma(model)
     model.learn(2 * 6 * 200)
     assert len(asked) == 2
     for center, sigma, population in asked:
@@ -344,10 +218,8 @@ def test_sigma_and_learning_rate_decay_to_their_floor(tmp_path: Path) -> None:
         learning_rate_decay=0.5,
         learning_rate_limit=0.01,
     )
-    model.set_logger(configure(str(tmp_path), ["csv"]))
-    asked = spy_on_ask(model)
-    model.learn(5 * 2 * 200)
-    rows = read_csv(tmp_path / "progress.csv")
+    asked = spy_on_sigma(model)
+    rows = learn_logged(model, 5 * 2 * 200, tmp_path)
     assert len(rows) == 5
     np.testing.assert_allclose([float(r["train/sigma"]) for r in rows], [0.1, 0.05, 0.025, 0.02, 0.02])
     np.testing.assert_allclose([float(r["train/learning_rate"]) for r in rows], [0.04, 0.02, 0.01, 0.01, 0.01])
@@ -360,13 +232,10 @@ def test_sigma_and_learning_rate_decay_to_their_floor(tmp_path: Path) -> None:
 def test_sb3_schedules(tmp_path: Path) -> None:
     total = 4 * PENDULUM_GENERATION
     model = pendulum_model(sigma=lambda progress: 0.1 * progress, learning_rate=lambda progress: 0.02 * progress)
-    model.set_logger(configure(str(tmp_path), ["csv"]))
-    asked = spy_on_ask(model)
-    model.learn(total)
-    rows = read_csv(tmp_path / "progress.csv")
+    asked = spy_on_sigma(model)
+    rows = learn_logged(model, total, tmp_path)
     assert len(rows) == 4
-    starts = [0] + [int(r["time/total_timesteps"]) for r in rows[:-1]]
-    progress = [1.0 - s / total for s in starts]
+    progress = progress_at_generation_starts(rows, total)
     np.testing.assert_allclose([float(r["train/sigma"]) for r in rows], [0.1 * p for p in progress])
     np.testing.assert_allclose([float(r["train/learning_rate"]) for r in rows], [0.02 * p for p in progress])
     for (_, sigma, _), p in zip(asked, progress):
@@ -376,9 +245,7 @@ def test_sb3_schedules(tmp_path: Path) -> None:
 def test_values_below_the_floor_are_not_raised(tmp_path: Path) -> None:
     """estool only decays while above the limit; a value set below it is used as given."""
     model = pendulum_model(sigma=0.005, learning_rate=1e-4)  # defaults: sigma_limit=0.01, learning_rate_limit=1e-3
-    model.set_logger(configure(str(tmp_path), ["csv"]))
-    model.learn(PENDULUM_GENERATION)
-    row = read_csv(tmp_path / "progress.csv")[0]
+    row = learn_logged(model, PENDULUM_GENERATION, tmp_path)[0]
     assert float(row["train/sigma"]) == pytest.approx(0.005)
     assert float(row["train/learning_rate"]) == pytest.approx(1e-4)
 
@@ -510,40 +377,6 @@ def test_decay_of_one_is_accepted() -> None:
 def test_negative_weight_decay() -> None:
     with pytest.raises(ValueError, match="weight_decay"):
         OpenES("LinearPolicy", "Pendulum-v1", weight_decay=-0.1)
-
-
-def test_nan_rewards_name_the_candidates_and_leave_parameters_unchanged() -> None:
-    """Constant observation 1: a candidate's action has the sign of its weight, NaN reward when positive."""
-    model = OpenES("LinearPolicy", DummyVecEnv([ConstantObsEnv]), population_size=6, zero_policy=True, seed=0)
-    asked = spy_on_ask(model)
-    before = (model.policy.parameters_to_vector(), model.strategy.center.copy(), model.policy.obs_count.item())
-    with pytest.raises(ValueError, match="candidate") as info:
-        model.learn(100)
-    population = asked[0][2]
-    bad = np.flatnonzero(population[:, 0] > 0).tolist()
-    assert len(bad) == 3  # mirrored pairs around 0: exactly one of each pair is positive
-    assert str(bad) in str(info.value)
-    np.testing.assert_array_equal(model.policy.parameters_to_vector(), before[0])
-    np.testing.assert_array_equal(model.strategy.center, before[1])
-    assert model.policy.obs_count.item() == before[2]
-    assert adam_state(model) == {}
-    assert model.strategy.best_fitness == -np.inf
-    assert model._n_updates == 0
-
-
-# ---------------------------------------------------------------------------- environments
-def test_dm_control_walker_walk() -> None:
-    shimmy = pytest.importorskip("shimmy")
-    gym.register_envs(shimmy)
-    env = make_vec_env("dm_control/walker-walk-v0", n_envs=1)
-    model = OpenES("MlpPolicy", env, population_size=4, seed=0, policy_kwargs=dict(net_arch=[16]))
-    initial = model.policy.parameters_to_vector()
-    model.learn(1)
-    assert model._n_updates == 1
-    assert model.num_timesteps == 4 * 1000
-    assert not np.array_equal(model.policy.parameters_to_vector(), initial)
-    action, _ = model.predict(env.reset())
-    assert action.shape == (1, 6) and np.all(np.abs(action) <= 1.0)
 
 
 # ---------------------------------------------------------------------------- ClipUp

@@ -1,4 +1,9 @@
-"""Behaviour of REINFORCE with discretized actions: learning, discretization, SB3 glue, save/load, errors."""
+"""What is specific to REINFORCE with discretized actions: discretization, logged keys, save/load of the policy,
+resumption with discarded episodes, Dict observations, errors, saves of older versions, non-finite rewards.
+
+What every algorithm does (learning, step accounting, callbacks, logging, save/load) is in ``test_algorithms.py``
+and ``test_save_load.py``.
+"""
 
 from __future__ import annotations
 
@@ -10,11 +15,9 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import torch as th
+from algorithms import assert_identical, check_resume, policy_state
 from envs import StepCounter
 from gymnasium import spaces
-from stable_baselines3.common.callbacks import BaseCallback
-from stable_baselines3.common.env_util import make_vec_env
-from stable_baselines3.common.evaluation import evaluate_policy
 from stable_baselines3.common.logger import KVWriter, Logger
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.policies import ActorCriticPolicy
@@ -22,14 +25,7 @@ from stable_baselines3.common.vec_env import DummyVecEnv
 
 from sb3_es.reinforce import REINFORCE, DiscretizedPolicy, MlpPolicy
 
-
-@pytest.fixture(autouse=True)
-def one_torch_thread() -> Any:
-    """Small MLPs run fastest, and with reproducible timings, on one thread (2-core CI machines)."""
-    threads = th.get_num_threads()
-    th.set_num_threads(1)
-    yield
-    th.set_num_threads(threads)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 class BoxActionEnv(gym.Env):
@@ -54,25 +50,6 @@ class BoxActionEnv(gym.Env):
         return obs, float(-np.sum(np.square(action))), self._t >= self.episode_length, False, {}
 
 
-class StopAt(BaseCallback):
-    """Returns False at the ``stop_at``-th call of ``on_step``; counts rollouts."""
-
-    def __init__(self, stop_at: int | None = None) -> None:
-        super().__init__()
-        self.stop_at = stop_at
-        self.rollout_starts = 0
-        self.rollout_ends = 0
-
-    def _on_rollout_start(self) -> None:
-        self.rollout_starts += 1
-
-    def _on_rollout_end(self) -> None:
-        self.rollout_ends += 1
-
-    def _on_step(self) -> bool:
-        return self.stop_at is None or self.n_calls < self.stop_at
-
-
 class RecordWriter(KVWriter):
     """Keeps every dumped key/value dict."""
 
@@ -85,20 +62,6 @@ class RecordWriter(KVWriter):
 
 def counted_cartpole(n_envs: int, counter: list[int]) -> DummyVecEnv:
     return DummyVecEnv([lambda: Monitor(StepCounter(gym.make("CartPole-v1"), counter)) for _ in range(n_envs)])
-
-
-def params_of(model: REINFORCE) -> list[th.Tensor]:
-    return [p.detach().clone() for p in model.policy.parameters()]
-
-
-def test_cartpole_learns() -> None:
-    """Budget: 60k env steps, 4 env slots, 8 episodes per update (about 8 s on a 2-core CPU, one torch thread)."""
-    env = make_vec_env("CartPole-v1", n_envs=4, seed=0)
-    model = REINFORCE("MlpPolicy", env, learning_rate=1e-2, n_episodes=8, gamma=0.99, seed=0, device="cpu")
-    model.learn(60_000)
-    eval_env = make_vec_env("CartPole-v1", n_envs=1, seed=100)
-    mean_return, _ = evaluate_policy(model, eval_env, n_eval_episodes=10, deterministic=True)
-    assert mean_return >= 475
 
 
 def test_joint_discretization_matches_product_grid() -> None:
@@ -161,43 +124,14 @@ def test_native_discrete_actions() -> None:
     assert set(np.unique(actions)) <= {-1, 0, 1}
 
 
-def test_exact_timestep_counting_with_three_envs() -> None:
-    counter = [0]
-    callback = StopAt()
-    model = REINFORCE("MlpPolicy", counted_cartpole(3, counter), n_episodes=4, seed=0)
-    model.learn(1_000, callback=callback)
-    assert model.num_timesteps >= 1_000
-    assert model.num_timesteps == counter[0]
-    assert model.num_timesteps == 3 * callback.n_calls
-    assert callback.rollout_starts == callback.rollout_ends == model._n_updates
-
-
-def test_callback_returning_false_stops_within_one_vec_step() -> None:
-    counter = [0]
-    callback = StopAt(stop_at=7)
-    model = REINFORCE("MlpPolicy", counted_cartpole(3, counter), n_episodes=30, seed=0)
-    before = params_of(model)
-    model.learn(10_000, callback=callback)
-    assert callback.n_calls == 7
-    assert model.num_timesteps == counter[0] == 21
-    # The interrupted update is discarded: no optimizer step was taken.
-    assert model._n_updates == 0
-    assert all(th.equal(a, b) for a, b in zip(before, params_of(model)))
-
-
-def test_logged_keys_and_progress_bar() -> None:
+def test_logged_train_keys() -> None:
     writer = RecordWriter()
     model = REINFORCE("MlpPolicy", "CartPole-v1", n_episodes=2, use_baseline=True, max_grad_norm=1.0, seed=0)
     model.set_logger(Logger(folder=None, output_formats=[writer]))
-    model.learn(300, progress_bar=True)
+    model.learn(300)
     assert writer.records
     keys = set(writer.records[-1])
     for key in (
-        "rollout/ep_rew_mean",
-        "rollout/ep_len_mean",
-        "time/fps",
-        "time/total_timesteps",
-        "time/iterations",
         "train/policy_loss",
         "train/entropy",
         "train/learning_rate",
@@ -225,29 +159,12 @@ def test_save_load_round_trip(tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize("use_baseline", [False, True])
-def test_resume_gives_identical_parameters(tmp_path: Path, use_baseline: bool) -> None:
+def test_resume_with_discarded_episodes_and_a_baseline(tmp_path: Path, use_baseline: bool) -> None:
+    """The generic check (``test_save_load.py``) with 3 env slots (episodes discarded), gradient clipping, entropy."""
     kwargs: dict[str, Any] = dict(n_episodes=4, use_baseline=use_baseline, max_grad_norm=0.5, ent_coef=0.01, seed=3)
-    total = 3_000
-
-    straight = REINFORCE("MlpPolicy", counted_cartpole(3, [0]), **kwargs)
-    straight.learn(total)
-
-    first = REINFORCE("MlpPolicy", counted_cartpole(3, [0]), **kwargs)
-    first.learn(1_000)
-    first.save(tmp_path / "half.zip")
-    th.manual_seed(12345)  # global RNG state must not matter
-    np.random.seed(12345)
-    resumed = REINFORCE.load(tmp_path / "half.zip", env=counted_cartpole(3, [0]))
-    # Same end point as learn(total): updates end at episode boundaries, so ask for what is left.
-    resumed.learn(total - resumed.num_timesteps, reset_num_timesteps=False)
-
-    assert resumed.num_timesteps == straight.num_timesteps
-    assert resumed._n_updates == straight._n_updates
-    for a, b in zip(straight.policy.state_dict().values(), resumed.policy.state_dict().values()):
-        assert th.equal(a, b)
-    opt_a, opt_b = straight.policy.optimizer.state_dict(), resumed.policy.optimizer.state_dict()
-    for key in opt_a["state"]:
-        assert th.equal(opt_a["state"][key]["exp_avg"], opt_b["state"][key]["exp_avg"])
+    check_resume(
+        lambda env: REINFORCE("MlpPolicy", env, **kwargs), lambda: counted_cartpole(3, [0]), 1_500, tmp_path / "a.zip"
+    )
 
 
 def test_dict_observation_from_dm_control() -> None:
@@ -310,21 +227,6 @@ def test_joint_action_space_too_large_suggests_factorized() -> None:
     assert factorized.action_net.out_features == 3 * 17
 
 
-def test_load_rejects_corrupt_and_foreign_files(tmp_path: Path) -> None:
-    from sb3_es import ARS
-
-    corrupt = tmp_path / "corrupt.zip"
-    corrupt.write_bytes(b"not a zip archive at all")
-    with pytest.raises(ValueError, match="corrupt"):
-        REINFORCE.load(corrupt)
-    ARS("LinearPolicy", "CartPole-v1", seed=0).save(tmp_path / "ars.zip")
-    with pytest.raises(ValueError, match=r"saved by sb3-es ARS"):
-        REINFORCE.load(tmp_path / "ars.zip")
-    REINFORCE("MlpPolicy", "CartPole-v1", seed=0).save(tmp_path / "reinforce.zip")
-    with pytest.raises(ValueError, match=r"saved by sb3-es REINFORCE"):
-        ARS.load(tmp_path / "reinforce.zip")
-
-
 # ---------------------------------------------------------------------------- saves of older versions
 FIXTURES = Path(__file__).parent / "fixtures"
 
@@ -381,5 +283,4 @@ def test_nan_reward_refused_naming_step_and_episode(use_baseline: bool) -> None:
         model.learn(100)
     # The first update was applied, the second refused: the weights are finite, those of one update.
     assert model._n_updates == 1
-    for a, b in zip(params_of(reference), params_of(model)):
-        assert th.equal(a, b)
+    assert_identical(policy_state(model), policy_state(reference))

@@ -10,6 +10,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import torch as th
+from algorithms import ALGORITHMS, POPULATION_ALGORITHMS, Algo
 from envs import NEVER_ENDING_ID, DiscreteMatchEnv, NaNObsWrapper, NeverEndingEnv, SuccessInfoWrapper, ToyEnv
 from gymnasium import spaces
 from gymnasium.wrappers import TimeLimit
@@ -23,29 +24,15 @@ from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.preprocessing import preprocess_obs
 from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
-from sb3_es import ARS, CMAES, PGPE, REINFORCE, OpenES, SimpleES
+from sb3_es import ARS
 from sb3_es.common.base_class import DEFAULT_MAX_EPISODE_STEPS
 from sb3_es.common.policies import MlpPolicy
 from sb3_es.evaluation import ObsStats
 
-ALGOS = ["ARS", "OpenES", "CMAES", "PGPE", "SimpleES", "REINFORCE"]
-POPULATION_ALGOS = ["ARS", "OpenES", "CMAES", "PGPE", "SimpleES"]
 
-
-def make_model(name: str, env: Any, **kwargs: Any) -> BaseAlgorithm:
-    """A small model of algorithm ``name``."""
-    policy_kwargs = dict(net_arch=[8])
-    if name == "ARS":
-        return ARS("MlpPolicy", env, n_delta=2, seed=0, policy_kwargs=policy_kwargs, **kwargs)
-    if name == "OpenES":
-        return OpenES("MlpPolicy", env, population_size=4, seed=0, policy_kwargs=policy_kwargs, **kwargs)
-    if name == "CMAES":
-        return CMAES("MlpPolicy", env, population_size=4, seed=0, policy_kwargs=policy_kwargs, **kwargs)
-    if name == "PGPE":
-        return PGPE("MlpPolicy", env, population_size=4, seed=0, policy_kwargs=policy_kwargs, **kwargs)
-    if name == "SimpleES":
-        return SimpleES("MlpPolicy", env, population_size=4, seed=0, policy_kwargs=policy_kwargs, **kwargs)
-    return REINFORCE("MlpPolicy", env, n_episodes=2, seed=0, policy_kwargs=policy_kwargs, **kwargs)
+def make_model(algo: Algo, env: Any, **kwargs: Any) -> BaseAlgorithm:
+    """A small MLP model of ``algo``: 4 candidates per generation, or 2 episodes per update."""
+    return algo.make(env, 4 if algo.population else 2, policy="MlpPolicy", policy_kwargs=dict(net_arch=[8]), **kwargs)
 
 
 class EpisodeLengths(BaseCallback):
@@ -71,8 +58,8 @@ class EpisodeLengths(BaseCallback):
 
 # ---------------------------------------------------------------------------- episodes that never end
 @pytest.mark.timeout(120)
-@pytest.mark.parametrize("algo", ALGOS)
-def test_env_id_without_time_limit_gets_one(algo: str) -> None:
+@pytest.mark.parametrize("algo", ALGORITHMS)
+def test_env_id_without_time_limit_gets_one(algo: Algo) -> None:
     """An env id registered without a time limit: learn() returns, episodes last the default cap, one warning."""
     model = make_model(algo, NEVER_ENDING_ID)
     assert model.get_env().env_is_wrapped(TimeLimit) == [True]  # type: ignore[union-attr]
@@ -88,9 +75,9 @@ def test_env_id_without_time_limit_gets_one(algo: str) -> None:
 
 
 @pytest.mark.timeout(120)
-@pytest.mark.parametrize("algo", ALGOS)
+@pytest.mark.parametrize("algo", ALGORITHMS)
 @pytest.mark.parametrize("n_envs", [1, 3])
-def test_vec_env_without_time_limit_is_cut_by_the_evaluation(algo: str, n_envs: int) -> None:
+def test_vec_env_without_time_limit_is_cut_by_the_evaluation(algo: Algo, n_envs: int) -> None:
     """A user VecEnv without a time limit: each slot is reset when its episode reaches max_episode_steps."""
     env = make_vec_env(NeverEndingEnv, n_envs=n_envs)
     model = make_model(algo, env, max_episode_steps=25)
@@ -104,8 +91,8 @@ def test_vec_env_without_time_limit_is_cut_by_the_evaluation(algo: str, n_envs: 
 
 
 @pytest.mark.timeout(60)
-@pytest.mark.parametrize("algo", ALGOS)
-def test_vec_env_without_time_limit_warns_once_and_uses_the_default(algo: str) -> None:
+@pytest.mark.parametrize("algo", ALGORITHMS)
+def test_vec_env_without_time_limit_warns_once_and_uses_the_default(algo: Algo) -> None:
     model = make_model(algo, make_vec_env(NeverEndingEnv, n_envs=2))
     with pytest.warns(UserWarning, match=f"no time limit.*{DEFAULT_MAX_EPISODE_STEPS} steps"):
         model.learn(1)
@@ -113,8 +100,8 @@ def test_vec_env_without_time_limit_warns_once_and_uses_the_default(algo: str) -
     assert {info["l"] for info in model.ep_info_buffer} == {DEFAULT_MAX_EPISODE_STEPS}
 
 
-@pytest.mark.parametrize("algo", ALGOS)
-def test_env_time_limit_is_used_without_warning(algo: str) -> None:
+@pytest.mark.parametrize("algo", ALGORITHMS)
+def test_env_time_limit_is_used_without_warning(algo: Algo) -> None:
     model = make_model(algo, "Pendulum-v1")
     with warnings.catch_warnings():
         warnings.filterwarnings("error", message=".*time limit")
@@ -127,8 +114,8 @@ def test_env_time_limit_is_used_without_warning(algo: str) -> None:
 
 
 @pytest.mark.timeout(60)
-@pytest.mark.parametrize("algo", ALGOS)
-def test_vec_env_wrapper_without_time_limit_is_a_clear_error(algo: str) -> None:
+@pytest.mark.parametrize("algo", ALGORITHMS)
+def test_vec_env_wrapper_without_time_limit_is_a_clear_error(algo: Algo) -> None:
     """A single slot cannot be reset through VecNormalize: an error says to add a TimeLimit (instead of a hang)."""
     model = make_model(algo, VecNormalize(make_vec_env(NeverEndingEnv, n_envs=2)), max_episode_steps=20)
     with pytest.raises(RuntimeError, match="max_episode_steps=20") as info:
@@ -185,8 +172,8 @@ def test_obs_stats_large_offset_and_exact_merge() -> None:
     assert forward.count == len(data)
 
 
-@pytest.mark.parametrize("algo", POPULATION_ALGOS)
-def test_nan_observation_stays_out_of_the_statistics(algo: str) -> None:
+@pytest.mark.parametrize("algo", POPULATION_ALGORITHMS)
+def test_nan_observation_stays_out_of_the_statistics(algo: Algo) -> None:
     # Discrete actions: the NaN observation gives NaN outputs, whose argmax is still a valid action.
     env = make_vec_env(
         ToyEnv, n_envs=2, env_kwargs=dict(discrete=True), wrapper_class=NaNObsWrapper, wrapper_kwargs=dict(at=3)
@@ -233,8 +220,8 @@ def test_discrete_observations_are_one_hot_as_in_sb3(name: str) -> None:
     assert policy.predict(batch)[0].shape == (5, 2)
 
 
-@pytest.mark.parametrize("algo", ALGOS)
-def test_dict_of_multi_binary_observations(algo: str) -> None:
+@pytest.mark.parametrize("algo", ALGORITHMS)
+def test_dict_of_multi_binary_observations(algo: Algo) -> None:
     """SB3's BitFlippingEnv (a goal env: a Dict of MultiBinary entries) trains and predicts with every algorithm."""
     env = BitFlippingEnv(n_bits=4)
     model = make_model(algo, env)
@@ -244,24 +231,19 @@ def test_dict_of_multi_binary_observations(algo: str) -> None:
     assert env.action_space.contains(int(action))
 
 
-@pytest.mark.parametrize("algo", POPULATION_ALGOS)
-def test_discrete_observation_task_is_solved(algo: str) -> None:
+@pytest.mark.parametrize("algo", POPULATION_ALGORITHMS)
+def test_discrete_observation_task_is_solved(algo: Algo) -> None:
     """A Discrete(4) observation (one-hot) whose value decides the rewarded action: the learned policy is perfect."""
     env = make_vec_env(DiscreteMatchEnv, n_envs=4, seed=0)
-    if algo == "ARS":
-        model: BaseAlgorithm = ARS("LinearPolicy", env, n_delta=8, seed=0)
-    elif algo == "OpenES":
-        model = OpenES("LinearPolicy", env, population_size=16, sigma=0.5, learning_rate=0.1, seed=0)
-    else:
-        model = CMAES("LinearPolicy", env, population_size=16, sigma=0.5, seed=0)
+    model = algo.cls(algo.policy, env, seed=0, **algo.cartpole)  # the settings that learn CartPole
     model.learn(10_000)
     mean_reward, _ = evaluate_policy(model, make_vec_env(DiscreteMatchEnv, seed=1), n_eval_episodes=5)
     assert mean_reward == 10.0
 
 
 # ---------------------------------------------------------------------------- success rate
-@pytest.mark.parametrize("algo", ALGOS)
-def test_success_rate_is_logged(algo: str, tmp_path: Any) -> None:
+@pytest.mark.parametrize("algo", ALGORITHMS)
+def test_success_rate_is_logged(algo: Algo, tmp_path: Any) -> None:
     env = make_vec_env(ToyEnv, n_envs=2, wrapper_class=SuccessInfoWrapper)
     model = make_model(algo, env)
     model.set_logger(configure(str(tmp_path), ["csv"]))
@@ -295,15 +277,15 @@ class GenerationLog(BaseCallback):
         return True
 
 
-@pytest.mark.parametrize("algo", ALGOS)
-def test_learn_stops_after_the_generation_in_flight(algo: str, capsys: pytest.CaptureFixture[str]) -> None:
+@pytest.mark.parametrize("algo", ALGORITHMS)
+def test_learn_stops_after_the_generation_in_flight(algo: Algo, capsys: pytest.CaptureFixture[str]) -> None:
     env = VecNormalize(make_vec_env(ToyEnv, n_envs=2))
     model = make_model(algo, env, verbose=1)
     log = GenerationLog()
     model.learn(150, callback=log)
     out = capsys.readouterr().out
     assert "overshoot by up to one" in out
-    if algo == "REINFORCE":
+    if not algo.population:
         assert "an update collects 2 episodes of at most 1000 steps" in out
     else:
         assert "a generation evaluates 4 candidates x 1 episode(s) = 4 episodes, at most 4000 env steps" in out
@@ -312,7 +294,7 @@ def test_learn_stops_after_the_generation_in_flight(algo: str, capsys: pytest.Ca
     assert log.ends[-2][0] < 150 <= log.ends[-1][0] == model.num_timesteps
     # Nothing moved after the generation in flight: the env's statistics are those at its end.
     assert float(env.obs_rms.count) == log.ends[-1][1]
-    if algo != "REINFORCE":
+    if algo.population:
         assert model._n_updates == len(log.starts)  # type: ignore[attr-defined]
 
 
@@ -357,8 +339,8 @@ class LocalsReader(BaseCallback):
         return True
 
 
-@pytest.mark.parametrize("algo", ALGOS)
-def test_callbacks_see_rewards_new_obs_and_actions(algo: str) -> None:
+@pytest.mark.parametrize("algo", ALGORITHMS)
+def test_callbacks_see_rewards_new_obs_and_actions(algo: Algo) -> None:
     env = DummyVecEnv([lambda: Monitor(ToyEnv()) for _ in range(3)])
     model = make_model(algo, env)
     reader = LocalsReader()

@@ -1,4 +1,8 @@
-"""Saving, loading, parameters and exact resumption of ARS runs."""
+"""
+Saving and loading, parametrized over ``envs.ALGORITHMS`` (as SB3's ``test_save_load.py`` is over ``MODEL_LIST``):
+round trip, parameters, exact resumption, damaged and foreign files. The state only one algorithm has (pycma's,
+Adam's, REINFORCE's discretization) is checked in that algorithm's file.
+"""
 
 from __future__ import annotations
 
@@ -8,27 +12,34 @@ import json
 import zipfile
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
+from algorithms import (
+    ALGORITHMS,
+    ALGOS,
+    POPULATION_ALGORITHMS,
+    Algo,
+    assert_identical,
+    check_resume,
+    hyperparameters,
+    pendulum_env,
+    policy_state,
+    spy_on_ask,
+)
 from stable_baselines3 import PPO
-from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.save_util import load_from_zip_file
-from stable_baselines3.common.vec_env import DummyVecEnv
 
 from sb3_es import ARS
 
-GENERATION = 2 * 2 * 200  # Pendulum-v1, n_delta=2, one env: 4 candidates x 200 steps
+GENERATION = 2 * 200  # Pendulum-v1, 2 candidates (episodes) per generation, one env
+MLP = dict(policy="MlpPolicy", policy_kwargs=dict(net_arch=[8]))
 
 
-def pendulum_env() -> DummyVecEnv:
-    return make_vec_env("Pendulum-v1", n_envs=1)
-
-
-def trained_model(steps: int = GENERATION, **kwargs) -> ARS:
-    model = ARS("LinearPolicy", pendulum_env(), n_delta=2, seed=0, **kwargs)
-    model.learn(steps)
-    return model
+def build(algo: Algo, env: Any = None, policy: str | None = None, **kwargs: Any) -> Any:
+    """:return: ``algo`` with generations of 2 candidates on ``env`` (default: a new one-env Pendulum)."""
+    return algo.make(pendulum_env() if env is None else env, 2, policy, **kwargs)
 
 
 def random_obs(n: int = 16) -> np.ndarray:
@@ -37,153 +48,145 @@ def random_obs(n: int = 16) -> np.ndarray:
     return np.stack([np.cos(theta), np.sin(theta), rng.uniform(-8, 8, n)], axis=1).astype(np.float32)
 
 
-def assert_same_policy(a: ARS, b: ARS) -> None:
-    np.testing.assert_array_equal(a.policy.parameters_to_vector(), b.policy.parameters_to_vector())
-    for name in ("obs_mean", "obs_var", "obs_count"):
-        np.testing.assert_array_equal(getattr(a.policy, name).numpy(), getattr(b.policy, name).numpy())
+def assert_same_predictions(a: Any, b: Any) -> None:
+    obs = random_obs()
+    np.testing.assert_array_equal(a.predict(obs, deterministic=True)[0], b.predict(obs, deterministic=True)[0])
+    np.testing.assert_array_equal(a.predict(obs[0], deterministic=True)[0], b.predict(obs[0], deterministic=True)[0])
+
+
+Saved = tuple[Algo, Any, Path]
+
+
+def save_trained(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory) -> Saved:
+    """:return: The algorithm of the test's parameter, a model of it trained for one generation, and its save."""
+    algo = request.param
+    path = tmp_path_factory.mktemp(algo.name) / "model.zip"
+    model = build(algo).learn(GENERATION)
+    model.save(path)
+    return algo, model, path
+
+
+@pytest.fixture(scope="module", params=ALGORITHMS)
+def saved(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory) -> Saved:
+    """Each algorithm, a model of it trained for one generation, and its save (the tests must not change them)."""
+    return save_trained(request, tmp_path_factory)
+
+
+@pytest.fixture(scope="module", params=POPULATION_ALGORITHMS)
+def saved_population(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory) -> Saved:
+    """The same for each population method (they save a strategy)."""
+    return save_trained(request, tmp_path_factory)
 
 
 # ---------------------------------------------------------------------------- round trip
-@pytest.mark.parametrize("policy", ["LinearPolicy", "MlpPolicy"])
-def test_save_load_round_trip(tmp_path: Path, policy: str) -> None:
-    model = ARS(
-        policy, pendulum_env(), n_delta=2, seed=0, policy_kwargs=dict(net_arch=[8]) if policy == "MlpPolicy" else None
-    )
+@pytest.mark.parametrize("algo", ALGORITHMS)
+def test_save_load_round_trip(algo: Algo, tmp_path: Path) -> None:
+    model = build(algo, **MLP)
     model.learn(GENERATION)
-    # The obs statistics must be non-trivial for this test to check that they are saved.
-    assert model.policy.obs_count.item() > 1
+    if algo.population:  # the observation statistics must be non-trivial for this test to check that they are saved
+        assert model.policy.obs_count.item() > 1
     model.save(tmp_path / "model.zip")
-    loaded = ARS.load(tmp_path / "model.zip")
+    loaded = algo.cls.load(tmp_path / "model.zip")
 
     assert type(loaded.policy) is type(model.policy)
-    assert_same_policy(model, loaded)
-    obs = random_obs()
-    np.testing.assert_array_equal(loaded.predict(obs)[0], model.predict(obs)[0])
-    np.testing.assert_array_equal(loaded.predict(obs[0])[0], model.predict(obs[0])[0])
-    # Hyperparameters and the strategy state come back too.
-    assert (loaded.n_delta, loaded.n_top, loaded.delta_std) == (2, 2, 0.05)
-    assert loaded.num_timesteps == model.num_timesteps
-    np.testing.assert_array_equal(loaded.strategy.center, model.strategy.center)
-    np.testing.assert_array_equal(loaded.strategy.ask(), model.strategy.ask())
+    assert_identical(policy_state(loaded), policy_state(model))
+    assert_same_predictions(loaded, model)
+    # Hyperparameters, counters and the strategy state come back too.
+    assert hyperparameters(loaded) == hyperparameters(model)
+    assert loaded.num_timesteps == model.num_timesteps == GENERATION
+    if algo.population:
+        np.testing.assert_array_equal(loaded.strategy.center, model.strategy.center)
+        np.testing.assert_array_equal(loaded.strategy.ask(), model.strategy.ask())
 
 
-def test_save_load_file_object() -> None:
-    model = trained_model()
+def test_save_load_file_object(saved: Saved) -> None:
+    algo, model, _ = saved
     buffer = io.BytesIO()
     model.save(buffer)
     buffer.seek(0)
-    loaded = ARS.load(buffer)
-    assert_same_policy(model, loaded)
-    obs = random_obs()
-    np.testing.assert_array_equal(loaded.predict(obs)[0], model.predict(obs)[0])
+    loaded = algo.cls.load(buffer)
+    assert type(loaded.policy) is type(model.policy)
+    assert_identical(policy_state(loaded), policy_state(model))
+    assert_same_predictions(loaded, model)
 
 
 @pytest.mark.parametrize("reset_num_timesteps", [True, False])
-def test_loaded_model_needs_env_to_learn(tmp_path: Path, reset_num_timesteps: bool) -> None:
-    trained_model().save(tmp_path / "model.zip")
-    loaded = ARS.load(tmp_path / "model.zip")
+def test_loaded_model_needs_env_to_learn(saved: Saved, reset_num_timesteps: bool) -> None:
+    algo, _, path = saved
+    loaded = algo.cls.load(path)
     with pytest.raises(ValueError, match="env"):
         loaded.learn(GENERATION, reset_num_timesteps=reset_num_timesteps)
 
 
 # ---------------------------------------------------------------------------- parameters
-def test_get_set_parameters_moves_strategy_center(tmp_path: Path) -> None:
-    source = trained_model(2 * GENERATION)
-    target = ARS("LinearPolicy", pendulum_env(), n_delta=2, seed=1)
+@pytest.mark.parametrize("algo", ALGORITHMS)
+def test_get_set_parameters(algo: Algo) -> None:
+    source = build(algo)
+    source.learn(2 * GENERATION)
+    target = build(algo, seed=1)
     params = source.get_parameters()
-    assert set(params) == {"policy"}
+    assert "policy" in params
     target.set_parameters(params)
-    assert_same_policy(source, target)
-    obs = random_obs()
-    np.testing.assert_array_equal(target.predict(obs)[0], source.predict(obs)[0])
-    weights = source.policy.parameters_to_vector()
-    np.testing.assert_array_equal(target.strategy.center.astype(np.float32), weights.astype(np.float32))
-
-    # The next learn() starts from the set weights: its candidates are center +/- perturbations.
-    asked = []
-    ask = target.strategy.ask
-
-    def spy() -> np.ndarray:
-        population = ask()
-        asked.append(population)
-        return population
-
-    target.strategy.ask = spy  # type: ignore[method-assign]
-    target.learn(GENERATION)
-    population = asked[0]
-    np.testing.assert_allclose((population[:2] + population[2:]) / 2, np.tile(weights, (2, 1)), atol=1e-6)
+    assert_identical(policy_state(target), policy_state(source))
+    assert_same_predictions(target, source)
+    if algo.population:
+        assert set(params) == {"policy"}
+        assert {"obs_mean", "obs_var", "obs_count"} <= set(params["policy"])
+        np.testing.assert_array_equal(params["policy"]["obs_mean"].numpy(), source.policy.obs_mean.numpy())
+        # The strategy follows the weights: the next learn() searches around them.
+        weights = source.policy.parameters_to_vector()
+        np.testing.assert_array_equal(target.strategy.center.astype(np.float32), weights.astype(np.float32))
+        centers = spy_on_ask(target, lambda strategy, _: strategy.center.copy())
+        target.learn(GENERATION)
+        np.testing.assert_allclose(centers[0], weights, atol=1e-6)
 
 
-def test_set_parameters_from_file(tmp_path: Path) -> None:
-    source = trained_model()
-    source.save(tmp_path / "source.zip")
-    target = ARS("LinearPolicy", pendulum_env(), n_delta=2, seed=1)
-    target.set_parameters(str(tmp_path / "source.zip"))
-    assert_same_policy(source, target)
-    np.testing.assert_array_equal(
-        target.strategy.center.astype(np.float32), source.policy.parameters_to_vector().astype(np.float32)
-    )
-
-
-def test_get_parameters_is_a_copy_of_the_policy_state() -> None:
-    model = trained_model()
-    state = model.get_parameters()["policy"]
-    assert {"obs_mean", "obs_var", "obs_count"} <= set(state)
-    np.testing.assert_array_equal(state["obs_mean"].numpy(), model.policy.obs_mean.numpy())
+def test_set_parameters_from_file(saved: Saved) -> None:
+    algo, source, path = saved
+    target = build(algo, seed=1)
+    target.set_parameters(str(path))
+    assert_identical(policy_state(target), policy_state(source))
+    if algo.population:
+        np.testing.assert_array_equal(
+            target.strategy.center.astype(np.float32), source.policy.parameters_to_vector().astype(np.float32)
+        )
 
 
 # ---------------------------------------------------------------------------- exact resumption
+@pytest.mark.parametrize("algo", ALGORITHMS)
 @pytest.mark.parametrize("n", [GENERATION, 2 * GENERATION])
-def test_resume_is_identical_to_an_uninterrupted_run(tmp_path: Path, n: int) -> None:
-    straight = ARS("LinearPolicy", pendulum_env(), n_delta=2, seed=3)
-    straight.learn(2 * n)
-
-    first = ARS("LinearPolicy", pendulum_env(), n_delta=2, seed=3)
-    first.learn(n)
-    first.save(tmp_path / "half.zip")
-    resumed = ARS.load(tmp_path / "half.zip", env=pendulum_env())
-    resumed.learn(n, reset_num_timesteps=False)
-
-    assert resumed.num_timesteps == straight.num_timesteps == 2 * n
-    assert resumed._n_updates == straight._n_updates
-    assert_same_policy(straight, resumed)
-    np.testing.assert_array_equal(straight.strategy.center, resumed.strategy.center)
-    # Sanity: training did move the parameters, so equality is not trivial.
-    assert not np.array_equal(first.policy.parameters_to_vector(), straight.policy.parameters_to_vector())
-
-
-def test_resume_mlp_matches_in_memory_continuation(tmp_path: Path) -> None:
-    """Same identity for an MLP, and the in-memory model continuing gives the same result as the loaded one."""
-    kwargs = dict(n_delta=2, seed=4, policy_kwargs=dict(net_arch=[8]))
-    first = ARS("MlpPolicy", pendulum_env(), **kwargs)
-    first.learn(GENERATION)
-    first.save(tmp_path / "m.zip")
-    first.learn(GENERATION, reset_num_timesteps=False)
-    resumed = ARS.load(tmp_path / "m.zip", env=pendulum_env())
-    resumed.learn(GENERATION, reset_num_timesteps=False)
-    assert_same_policy(first, resumed)
+def test_resume_is_identical_to_an_uninterrupted_run(algo: Algo, n: int, tmp_path: Path) -> None:
+    straight, resumed = check_resume(
+        lambda env: build(algo, env, **MLP, seed=3), pendulum_env, n, tmp_path / "half.zip"
+    )
+    assert resumed.num_timesteps == straight.num_timesteps == 2 * n + GENERATION  # 2 n, then one more generation
+    if algo.population:
+        np.testing.assert_array_equal(straight.strategy.center, resumed.strategy.center)
+        np.testing.assert_array_equal(straight.strategy.ask(), resumed.strategy.ask())
 
 
 # ---------------------------------------------------------------------------- bad files
-def test_load_random_bytes(tmp_path: Path) -> None:
+@pytest.mark.parametrize("algo", ALGORITHMS)
+def test_load_random_bytes(algo: Algo, tmp_path: Path) -> None:
     path = tmp_path / "random.zip"
     path.write_bytes(np.random.default_rng(0).bytes(4096))
     with pytest.raises(ValueError, match="corrupt"):
-        ARS.load(path)
+        algo.cls.load(path)
 
 
-def test_load_truncated_zip(tmp_path: Path) -> None:
-    trained_model().save(tmp_path / "model.zip")
-    raw = (tmp_path / "model.zip").read_bytes()
-    path = tmp_path / "truncated.zip"
-    path.write_bytes(raw[: len(raw) // 2])
+def test_load_truncated_zip(saved: Saved, tmp_path: Path) -> None:
+    algo, _, path = saved
+    raw = path.read_bytes()
+    truncated = tmp_path / "truncated.zip"
+    truncated.write_bytes(raw[: len(raw) // 2])
     with pytest.raises(ValueError, match="corrupt"):
-        ARS.load(path)
+        algo.cls.load(truncated)
 
 
-def test_load_missing_file(tmp_path: Path) -> None:
+@pytest.mark.parametrize("algo", ALGORITHMS)
+def test_load_missing_file(algo: Algo, tmp_path: Path) -> None:
     with pytest.raises(FileNotFoundError):
-        ARS.load(tmp_path / "nothing_here.zip")
+        algo.cls.load(tmp_path / "nothing_here.zip")
 
 
 def rewrite_member(src: Path, dst: Path, member: str, mutate: Callable[[bytes], bytes | None]) -> None:
@@ -201,20 +204,6 @@ def drop_strategy(data: bytes) -> bytes:
     decoded = json.loads(data)
     del decoded["strategy"]
     return json.dumps(decoded).encode()
-
-
-def test_load_save_without_strategy_state(tmp_path: Path) -> None:
-    trained_model().save(tmp_path / "model.zip")
-    rewrite_member(tmp_path / "model.zip", tmp_path / "damaged.zip", "data", drop_strategy)
-    with pytest.raises(ValueError, match="strategy"):
-        ARS.load(tmp_path / "damaged.zip")
-
-
-def test_load_save_without_policy(tmp_path: Path) -> None:
-    trained_model().save(tmp_path / "model.zip")
-    rewrite_member(tmp_path / "model.zip", tmp_path / "damaged.zip", "policy.pth", lambda _: None)
-    with pytest.raises(ValueError, match="policy"):
-        ARS.load(tmp_path / "damaged.zip")
 
 
 def garble_policy_weights(content: bytes) -> bytes:
@@ -236,18 +225,29 @@ def garble_strategy_pickle(content: bytes) -> bytes:
 
 
 @pytest.mark.parametrize(
-    ("member", "mutate"),
-    [
-        ("policy.pth", garble_policy_weights),
-        ("data", truncate_strategy_pickle),
-        ("data", garble_strategy_pickle),
-    ],
+    ("mutate", "match"), [(lambda _: None, "policy"), (garble_policy_weights, "corrupt")], ids=["missing", "garbled"]
 )
-def test_load_zip_with_corrupt_member(tmp_path: Path, member: str, mutate: Callable[[bytes], bytes]) -> None:
-    trained_model().save(tmp_path / "model.zip")
-    rewrite_member(tmp_path / "model.zip", tmp_path / "damaged.zip", member, mutate)
-    with pytest.raises(ValueError, match="corrupt"):
-        ARS.load(tmp_path / "damaged.zip")
+def test_load_zip_with_a_damaged_policy(
+    saved: Saved, tmp_path: Path, mutate: Callable[[bytes], bytes | None], match: str
+) -> None:
+    algo, _, path = saved
+    rewrite_member(path, tmp_path / "damaged.zip", "policy.pth", mutate)
+    with pytest.raises(ValueError, match=match):
+        algo.cls.load(tmp_path / "damaged.zip")
+
+
+@pytest.mark.parametrize(
+    ("mutate", "match"),
+    [(drop_strategy, "strategy"), (truncate_strategy_pickle, "corrupt"), (garble_strategy_pickle, "corrupt")],
+    ids=["missing", "truncated", "garbled"],
+)
+def test_load_zip_with_a_damaged_strategy(
+    saved_population: Saved, tmp_path: Path, mutate: Callable[[bytes], bytes], match: str
+) -> None:
+    algo, _, path = saved_population
+    rewrite_member(path, tmp_path / "damaged.zip", "data", mutate)
+    with pytest.raises(ValueError, match=match):
+        algo.cls.load(tmp_path / "damaged.zip")
 
 
 @pytest.fixture(scope="module")
@@ -257,14 +257,10 @@ def ppo_save(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return path
 
 
-def test_load_ppo_save_is_rejected(ppo_save: Path) -> None:
-    with pytest.raises(ValueError, match=r"ARS\.load"):
-        ARS.load(ppo_save)
-
-
-def test_load_ppo_save_names_the_algorithm(ppo_save: Path) -> None:
-    with pytest.raises(ValueError, match="PPO"):
-        ARS.load(ppo_save)
+@pytest.mark.parametrize("algo", ALGORITHMS)
+def test_load_ppo_save_is_rejected_and_names_ppo(algo: Algo, ppo_save: Path) -> None:
+    with pytest.raises(ValueError, match=rf"{algo.name}\.load\(\): it was saved by PPO"):
+        algo.cls.load(ppo_save)
 
 
 def test_load_sb3_contrib_ars_save_is_rejected(tmp_path: Path) -> None:
@@ -275,13 +271,12 @@ def test_load_sb3_contrib_ars_save_is_rejected(tmp_path: Path) -> None:
         ARS.load(path)
 
 
-@pytest.mark.parametrize("other", ["OpenES", "CMAES"])
-def test_load_ars_save_with_another_sb3_es_algorithm(tmp_path: Path, other: str) -> None:
-    import sb3_es
-
-    trained_model().save(tmp_path / "ars.zip")
-    with pytest.raises(ValueError, match=r"saved by sb3-es ARS.*ARS\.load\(\)"):
-        getattr(sb3_es, other).load(tmp_path / "ars.zip")
+def test_load_a_save_with_another_algorithm(saved: Saved) -> None:
+    algo, _, path = saved
+    for other in ALGOS:
+        if other is not algo:
+            with pytest.raises(ValueError, match=rf"saved by sb3-es {algo.name}.*{algo.name}\.load\(\)"):
+                other.cls.load(path)
 
 
 # ---------------------------------------------------------------------------- files from older versions

@@ -6,17 +6,12 @@ from typing import Any
 
 import numpy as np
 import pytest
+from algorithms import POPULATION_ALGORITHMS, Algo
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.evaluation import evaluate_policy
 
-from sb3_es import ARS, CMAES, OpenES
+from sb3_es import ARS
 from sb3_es.evaluation import PopulationResult, RewardShaping, VecEnvEvaluator
-
-POPULATION_ALGOS: list[tuple[type, dict[str, Any]]] = [
-    (ARS, dict(n_delta=2)),
-    (OpenES, dict(population_size=4)),
-    (CMAES, dict(population_size=4)),
-]
 
 
 class RecordingEvaluator(VecEnvEvaluator):
@@ -62,14 +57,12 @@ def test_bad_shaping_is_refused_at_construction(kwargs: dict[str, Any], message:
         ARS("LinearPolicy", "CartPole-v1", **kwargs)
 
 
-@pytest.mark.parametrize("algo, algo_kwargs", POPULATION_ALGOS)
-def test_shaping_changes_the_fitness_not_the_logged_returns(algo: type, algo_kwargs: dict[str, Any]) -> None:
+@pytest.mark.parametrize("algo", POPULATION_ALGORITHMS)
+def test_shaping_changes_the_fitness_not_the_logged_returns(algo: Algo) -> None:
     """CartPole pays 1 per step; a fall (termination) pays -5 in the fitness, a time limit keeps its 1."""
     env = make_vec_env("CartPole-v1", n_envs=2, seed=0)
     evaluator = RecordingEvaluator(env)
-    model = algo(
-        "LinearPolicy", env, terminal_reward=-5.0, reward_clip=(-10, 0.5), evaluator=evaluator, seed=0, **algo_kwargs
-    )
+    model = algo.make(env, 4, terminal_reward=-5.0, reward_clip=(-10, 0.5), evaluator=evaluator)
     model.learn(1, log_interval=10)
     result = evaluator.results[-1]
     assert result.shaped_returns is not None
@@ -106,15 +99,15 @@ def test_shaping_is_saved_and_loaded(tmp_path: Any) -> None:
 
 
 # ---------------------------------------------------------------------------- zero_policy
-@pytest.mark.parametrize("algo, algo_kwargs", POPULATION_ALGOS)
-def test_zero_policy_zeroes_only_the_output_layer(algo: type, algo_kwargs: dict[str, Any]) -> None:
-    model = algo("MlpPolicy", "Pendulum-v1", zero_policy=True, seed=0, **algo_kwargs)
+@pytest.mark.parametrize("algo", POPULATION_ALGORITHMS)
+def test_zero_policy_zeroes_only_the_output_layer(algo: Algo) -> None:
+    model = algo.make("Pendulum-v1", 4, policy="MlpPolicy", zero_policy=True)
     center = model.strategy.center
     out = model.policy.output_layer_slice()
     assert out.stop == model.policy.num_params
     np.testing.assert_array_equal(center[out], 0.0)
     assert np.all(center[: out.start] != 0.0) or np.count_nonzero(center[: out.start]) > 0.9 * out.start
-    linear = algo("LinearPolicy", "Pendulum-v1", zero_policy=True, seed=0, **algo_kwargs)
+    linear = algo.make("Pendulum-v1", 4, policy="LinearPolicy", zero_policy=True)
     np.testing.assert_array_equal(linear.strategy.center, 0.0)
 
 

@@ -124,7 +124,9 @@ def run(args: list[str], cwd: Path) -> subprocess.CompletedProcess:
 
 
 def load_script(name: str) -> ModuleType:
-    """Import benchmarks/<name>.py as a module."""
+    """Import benchmarks/<name>.py as a module (with benchmarks/ on ``sys.path``, as when it runs as a script)."""
+    if str(ROOT / "benchmarks") not in sys.path:
+        sys.path.append(str(ROOT / "benchmarks"))
     spec = importlib.util.spec_from_file_location(f"benchmarks_{name}", ROOT / "benchmarks" / f"{name}.py")
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)

@@ -74,7 +74,10 @@ def check_save_file(
         if isinstance(path, io.BufferedIOBase):
             path.seek(0)
     if data is None or params is None or "policy" not in params:
-        raise ValueError(f"Cannot load {path!r}: the archive has no model data or no policy parameters.")
+        raise ValueError(
+            f"Cannot load {path!r}: the archive has no model data or no policy parameters, so it is corrupt (e.g. "
+            "truncated) or not a Stable-Baselines3 save file. Re-save the model, or load the right file."
+        )
     saved_by = data.get("_algorithm_name")
     if saved_by != algorithm:
         origin = (

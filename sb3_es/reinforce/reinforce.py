@@ -245,12 +245,12 @@ class REINFORCE(ESBaseAlgorithm):
         :return: The trained model.
         """
         iteration = 0
+        if self.env is None:
+            raise ValueError("This model has no environment: pass env= to load() or call set_env() before learn().")
         total_timesteps, callback = self._setup_learn(
             total_timesteps, callback, reset_num_timesteps, tb_log_name, progress_bar
         )
         callback.on_training_start(locals(), globals())
-        if self.env is None:
-            raise ValueError("This model has no environment: pass env= to load() or call set_env() before learn().")
         if self.n_episodes < self.env.num_envs:
             warnings.warn(
                 f"n_episodes={self.n_episodes} < n_envs={self.env.num_envs}: some env slots collect no episode "

@@ -1,0 +1,135 @@
+"""
+What the benchmark scripts share: the description of the machine and software a figure was measured on (SB3's
+``get_system_info()`` plus what it lacks: the CPU model, the core count, sb3-es and optional packages), and the
+plain ``env.step`` loop, the machine's ceiling that throughputs are compared with.
+
+The scripts import it as ``from common import ...`` (Python puts a script's own folder on ``sys.path``).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import multiprocessing as mp
+import os
+import platform
+import time
+from dataclasses import dataclass
+from importlib import metadata
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+from stable_baselines3.common.utils import get_system_info
+
+import sb3_es
+
+#: The entries of SB3's ``get_system_info()`` that :func:`versions` reports, in this order.
+SB3_VERSIONS = ("Python", "Stable-Baselines3", "PyTorch", "Numpy", "Gymnasium")
+
+
+def cpu_model() -> str:
+    """:return: The CPU's model name (from ``/proc/cpuinfo`` on Linux), else what ``platform`` knows."""
+    with contextlib.suppress(OSError):
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    return platform.processor() or platform.machine() or "unknown CPU"
+
+
+def hardware() -> str:
+    """:return: One line: CPU model, logical CPUs, operating system."""
+    return f"{cpu_model()}, {os.cpu_count()} logical CPUs, {platform.system()} {platform.release()}"
+
+
+def versions(*packages: str) -> str:
+    """
+    :param packages: Distribution names of optional packages to report too (e.g. ``"sb3-contrib"``, ``"ray"``).
+    :return: One line: the versions of Python, sb3-es, SB3, PyTorch, NumPy, Gymnasium and ``packages``.
+    """
+    info = get_system_info(print_info=False)[0]
+    items = [f"{key} {info[key]}" for key in SB3_VERSIONS[:1]] + [f"sb3-es {sb3_es.__version__}"]
+    items += [f"{key} {info[key]}" for key in SB3_VERSIONS[1:]]
+    for package in packages:
+        try:
+            items.append(f"{package} {metadata.version(package)}")
+        except metadata.PackageNotFoundError:
+            items.append(f"{package} not installed")
+    return ", ".join(items)
+
+
+def system_info() -> dict[str, str]:
+    """:return: SB3's ``get_system_info()`` with the CPU model, the logical CPUs and the sb3-es version added."""
+    info = dict(get_system_info(print_info=False)[0])
+    info.update({"CPU": cpu_model(), "Logical CPUs": str(os.cpu_count()), "sb3-es": sb3_es.__version__})
+    return info
+
+
+# ---------------------------------------------------------------------------------------------- plain loop
+@dataclass
+class PlainLoop:
+    """
+    What the plain step loop measured, over all its processes.
+
+    :param rate: Env steps per second, the sum of the processes' rates.
+    :param steps: Env steps taken in the timed window, all processes.
+    :param episodes: Episodes ended in the timed window, all processes.
+    :param seconds: The longest process's timed window.
+    """
+
+    rate: float
+    steps: int
+    episodes: int
+    seconds: float
+
+
+def _plain_worker(env_id: str, seconds: float, warmup: float, seed: int, barrier: Any, queue: Any) -> None:
+    env = gym.make(env_id)
+    env.reset(seed=seed)
+    env.action_space.seed(seed)
+
+    def loop(duration: float) -> tuple[int, int, float]:
+        steps = episodes = 0
+        start = time.perf_counter()
+        end = start + duration
+        while time.perf_counter() < end:
+            for _ in range(100):
+                _, _, terminated, truncated, _ = env.step(env.action_space.sample())
+                steps += 1
+                if terminated or truncated:
+                    episodes += 1
+                    env.reset()
+        return steps, episodes, time.perf_counter() - start
+
+    loop(warmup)
+    barrier.wait()
+    queue.put(loop(seconds))
+    env.close()
+
+
+def measure_plain(env_id: str, n_procs: int, seconds: float, warmup: float = 1.0) -> PlainLoop:
+    """
+    The machine's ceiling: ``n_procs`` fresh processes step ``gym.make(env_id)`` with random actions (resetting at
+    the end of each episode), warm up for ``warmup`` seconds, wait for each other, then count for ``seconds``.
+
+    :param env_id: Gymnasium env id.
+    :param n_procs: Processes stepping in parallel.
+    :param seconds: Timed window.
+    :param warmup: Untimed seconds before the window.
+    :return: The measurement.
+    """
+    ctx = mp.get_context("forkserver" if "forkserver" in mp.get_all_start_methods() else "spawn")
+    barrier, queue = ctx.Barrier(n_procs), ctx.Queue()
+    procs = [
+        ctx.Process(target=_plain_worker, args=(env_id, seconds, warmup, i, barrier, queue)) for i in range(n_procs)
+    ]
+    for proc in procs:
+        proc.start()
+    outs = [queue.get() for _ in procs]
+    for proc in procs:
+        proc.join()
+    return PlainLoop(
+        rate=sum(steps / elapsed for steps, _, elapsed in outs),
+        steps=sum(out[0] for out in outs),
+        episodes=sum(out[1] for out in outs),
+        seconds=max(out[2] for out in outs),
+    )

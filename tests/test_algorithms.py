@@ -1,0 +1,259 @@
+"""
+What every algorithm does alike, parametrized over ``envs.ALGORITHMS`` (as SB3's tests are over ``MODEL_LIST``):
+learning CartPole, step accounting, callbacks, logging, Dict observations, non-finite rewards. The files of
+each algorithm keep what is specific to it; saving and loading are in ``test_save_load.py``.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from algorithms import (
+    ALGORITHMS,
+    POPULATION_ALGORITHMS,
+    Algo,
+    GenerationRecorder,
+    assert_identical,
+    learn_logged,
+    pendulum_env,
+    policy_state,
+    policy_vector,
+    spy_on_ask,
+)
+from envs import ConstantObsEnv, NaNRewardWrapper, counting_env
+from stable_baselines3.common.callbacks import StopTrainingOnMaxEpisodes
+from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.evaluation import evaluate_policy
+from stable_baselines3.common.vec_env import DummyVecEnv
+
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
+
+#: Pendulum-v1 episodes last exactly 200 steps: a generation of 2 candidates (episodes) on one env is 400 steps.
+GENERATION = 2 * 200
+
+
+def pendulum_model(algo: Algo, **kwargs: Any) -> Any:
+    """:return: ``algo`` on one Pendulum-v1 env with generations of 2 candidates (:data:`GENERATION` steps)."""
+    return algo.make(pendulum_env(), 2, **kwargs)
+
+
+def assert_updates(algo: Algo, model: Any, n: int) -> None:
+    """The model, and the strategy or optimizer by its own count (where it keeps one), applied ``n`` updates."""
+    assert model._n_updates == n
+    if algo.optimizer_steps is not None:
+        assert algo.optimizer_steps(model) == n
+
+
+# ---------------------------------------------------------------------------- learning
+@pytest.mark.parametrize("algo", ALGORITHMS)
+def test_learns_cartpole(algo: Algo) -> None:
+    """Budgets and seeds: ``envs.ALGOS`` (a few seconds each on 2 CPU cores)."""
+    env = make_vec_env("CartPole-v1", n_envs=algo.cartpole_envs, seed=0)
+    model = algo.cls(algo.policy, env, **{**algo.defaults, "seed": 0, **algo.cartpole})
+    model.learn(algo.cartpole_steps)
+    eval_env = make_vec_env("CartPole-v1", n_envs=1, seed=123)
+    mean_return, _ = evaluate_policy(model, eval_env, n_eval_episodes=10, deterministic=True)
+    assert mean_return >= 475
+
+
+# ---------------------------------------------------------------------------- step accounting
+@pytest.mark.parametrize("algo", ALGORITHMS)
+def test_exact_timestep_count(algo: Algo) -> None:
+    counter = [0]
+    extra = dict(n_eval_episodes=2) if algo.population else {}
+    model = algo.make(counting_env("CartPole-v1", 3, counter), 6, **extra)
+    recorder = GenerationRecorder()
+    model.learn(1500, callback=recorder)
+    assert model.num_timesteps >= 1500
+    assert model.num_timesteps == counter[0]
+    assert model.num_timesteps % 3 == 0
+    assert recorder.n_calls == model.num_timesteps // 3  # on_step once per vec step
+    assert len(recorder.rollout_starts) == recorder.rollout_ends == model._n_updates
+    assert_updates(algo, model, model._n_updates)
+    assert recorder.training_started == recorder.training_ended == 1
+    # Continuing the run keeps counting exactly.
+    model.learn(500, reset_num_timesteps=False, callback=recorder)
+    assert model.num_timesteps == counter[0]
+    assert recorder.n_calls == model.num_timesteps // 3
+
+
+@pytest.mark.parametrize("algo", ALGORITHMS)
+def test_last_generation_is_completed_and_the_budget_respected(algo: Algo) -> None:
+    """learn(N) runs whole generations until at least N steps (Pendulum: generations of fixed length)."""
+    model = pendulum_model(algo)
+    model.learn(GENERATION + 1)
+    assert model.num_timesteps == 2 * GENERATION
+    assert model._n_updates == 2
+    model.learn(GENERATION)
+    assert model.num_timesteps == GENERATION
+
+
+# ---------------------------------------------------------------------------- callbacks
+@pytest.mark.parametrize("algo", ALGORITHMS)
+@pytest.mark.parametrize("offset", [1, 6])
+def test_callback_stop_discards_interrupted_generation(algo: Algo, offset: int) -> None:
+    counter = [0]
+    model = algo.make(counting_env("CartPole-v1", 2, counter), 4, seed=2)
+    # Stop on the `offset`-th vec step of the 3rd generation.
+    recorder = GenerationRecorder(stop_in_generation=3, offset=offset)
+    model.learn(100_000, callback=recorder)
+    assert len(recorder.rollout_starts) == 3
+    stop_at = recorder.rollout_starts[2] + offset
+    assert recorder.n_calls == stop_at  # stopped within that very vec step
+    assert model.num_timesteps == stop_at * 2 == counter[0]
+    assert_updates(algo, model, 2)
+    # The parameters and the observation statistics are those of the last completed update.
+    assert_identical(policy_state(model), recorder.state_at_start[2])
+    if algo.population:
+        np.testing.assert_array_equal(model.strategy.center.astype(np.float32), recorder.params_at_start[2])
+    assert not np.array_equal(recorder.params_at_start[2], recorder.params_at_start[0])
+    assert recorder.training_ended == 1
+    # Training can go on afterwards.
+    model.learn(1, reset_num_timesteps=False)
+    assert_updates(algo, model, 3)
+
+
+@pytest.mark.parametrize("algo", ALGORITHMS)
+def test_callback_stop_in_first_generation_keeps_initial_parameters(algo: Algo) -> None:
+    counter = [0]
+    model = algo.make(counting_env("CartPole-v1", 3, counter), 6)
+    initial = policy_state(model)
+    model.learn(10_000, callback=GenerationRecorder(stop_at=7))
+    assert model.num_timesteps == counter[0] == 7 * 3
+    assert_updates(algo, model, 0)
+    assert_identical(policy_state(model), initial)
+
+
+@pytest.mark.parametrize("algo", POPULATION_ALGORITHMS)
+def test_callback_stop_on_last_step_of_a_generation_keeps_it(algo: Algo) -> None:
+    model = pendulum_model(algo)
+    recorder = GenerationRecorder(stop_at=2 * GENERATION)
+    model.learn(100_000, callback=recorder)
+    assert model.num_timesteps == 2 * GENERATION
+    assert_updates(algo, model, 2)  # the generation completed on that step: its update is applied
+    assert len(recorder.rollout_starts) == 2
+    assert not np.array_equal(policy_vector(model), recorder.params_at_start[1])
+    np.testing.assert_array_equal(policy_vector(model), model.strategy.center.astype(np.float32))
+
+
+@pytest.mark.parametrize("algo", ALGORITHMS)
+def test_stop_training_on_max_episodes(algo: Algo) -> None:
+    counter = [0]
+    model = algo.make(counting_env("CartPole-v1", 2, counter), 8)
+    initial = policy_state(model)
+    callback = StopTrainingOnMaxEpisodes(max_episodes=2)
+    model.learn(100_000, callback=callback)
+    assert callback.n_episodes >= 4  # 2 per env
+    assert model.num_timesteps == counter[0] < 2_000
+    assert_updates(algo, model, 0)  # 8 episodes per generation: it was interrupted
+    assert_identical(policy_state(model), initial)
+
+
+@pytest.mark.parametrize("algo", ALGORITHMS)
+def test_progress_bar(algo: Algo) -> None:
+    model = pendulum_model(algo)
+    model.learn(GENERATION, progress_bar=True)
+    assert model.num_timesteps == GENERATION
+
+
+# ---------------------------------------------------------------------------- logging
+@pytest.mark.parametrize("algo", ALGORITHMS)
+def test_logger_csv_keys(algo: Algo, tmp_path: Path) -> None:
+    """SB3's keys, one row per generation; each algorithm's ``train/`` keys are checked in its own file."""
+    model = pendulum_model(algo)
+    rows = learn_logged(model, 2 * GENERATION, tmp_path)
+    assert len(rows) == 2
+    required = {"rollout/ep_rew_mean", "rollout/ep_len_mean", "time/fps", "time/total_timesteps", "time/iterations"}
+    if algo.population:
+        required |= {"rollout/candidate_return_max", "rollout/candidate_return_mean"}
+    assert required <= set(rows[0])
+    for row in rows:
+        assert all(row[key] != "" for key in required)
+    assert [int(r["time/total_timesteps"]) for r in rows] == [GENERATION, 2 * GENERATION]
+    assert [int(r["time/iterations"]) for r in rows] == [1, 2]
+    assert float(rows[0]["rollout/ep_len_mean"]) == 200
+    if algo.population:
+        # One env, one episode per candidate: the first generation's episodes are the candidates'.
+        assert float(rows[0]["rollout/ep_rew_mean"]) == pytest.approx(float(rows[0]["rollout/candidate_return_mean"]))
+
+
+@pytest.mark.parametrize("algo", ALGORITHMS)
+def test_log_interval(algo: Algo, tmp_path: Path) -> None:
+    model = pendulum_model(algo)
+    rows = learn_logged(model, 4 * GENERATION, tmp_path, log_interval=2)
+    assert [int(r["time/iterations"]) for r in rows] == [2, 4]
+
+
+@pytest.mark.parametrize("algo", ALGORITHMS)
+def test_tensorboard_log(algo: Algo, tmp_path: Path) -> None:
+    model = pendulum_model(algo, tensorboard_log=str(tmp_path))
+    model.learn(GENERATION)
+    run_dir = tmp_path / f"{algo.tb_log_name}_1"
+    assert run_dir.is_dir()
+    assert any(p.name.startswith("events.out.tfevents") and p.stat().st_size > 0 for p in run_dir.iterdir())
+    model.learn(GENERATION)  # a new run gets the next id
+    assert (tmp_path / f"{algo.tb_log_name}_2").is_dir()
+
+
+# ---------------------------------------------------------------------------- environments
+@pytest.mark.parametrize("algo", ALGORITHMS)
+def test_dm_control_dict_observations(algo: Algo) -> None:
+    """dm_control's walker-walk through shimmy: Dict observations, 6 Box actions (episodes cut to 50 steps)."""
+    shimmy = pytest.importorskip("shimmy")
+    gym.register_envs(shimmy)
+    env = make_vec_env("dm_control/walker-walk-v0", n_envs=1, env_kwargs=dict(max_episode_steps=50))
+    assert isinstance(env.observation_space, gym.spaces.Dict)
+    model = algo.make(env, 4, policy="MultiInputPolicy")
+    initial = policy_vector(model)
+    model.learn(1)
+    assert model.num_timesteps == 4 * 50
+    assert_updates(algo, model, 1)
+    assert not np.array_equal(policy_vector(model), initial)
+    if algo.population:
+        assert model.policy.obs_dim == 24
+        assert model.policy.obs_count.item() == pytest.approx(4 * 50 + 1e-4)
+    action, _ = model.predict(env.reset(), deterministic=True)
+    assert action.shape == (1, 6) and np.all(np.abs(action) <= 1.0)
+
+
+# ---------------------------------------------------------------------------- non-finite returns
+def strategy_state(model: Any) -> dict[str, Any]:
+    """:return: What a failed generation must leave as it was: policy state, strategy center, best fitness."""
+    return dict(
+        policy_state(model),
+        center=model.strategy.center.copy(),
+        best_fitness=getattr(model.strategy, "best_fitness", -np.inf),
+    )
+
+
+@pytest.mark.parametrize("algo", POPULATION_ALGORITHMS)
+def test_nan_rewards_name_the_candidates_and_leave_everything_unchanged(algo: Algo) -> None:
+    """Constant observation 1: a candidate's action has the sign of its weight, NaN reward when positive."""
+    model = algo.make(DummyVecEnv([ConstantObsEnv]), 6)
+    asked = spy_on_ask(model)
+    before = strategy_state(model)
+    with pytest.raises(ValueError, match="candidate") as info:
+        model.learn(100)
+    bad = np.flatnonzero(asked[0][:, 0] > 0).tolist()
+    assert 0 < len(bad) < 6
+    assert str(bad) in str(info.value)
+    assert_identical(strategy_state(model), before)
+    assert_updates(algo, model, 0)
+
+
+@pytest.mark.parametrize("algo", POPULATION_ALGORITHMS)
+def test_nan_rewards_after_training_leave_last_update(algo: Algo) -> None:
+    model = algo.make(make_vec_env("Pendulum-v1", n_envs=1), 4)
+    model.learn(1)
+    assert model._n_updates == 1
+    before = strategy_state(model)
+    model.set_env(make_vec_env("Pendulum-v1", n_envs=1, wrapper_class=NaNRewardWrapper))
+    with pytest.raises(ValueError, match=re.escape("candidate(s) [0, 1, 2, 3]")):
+        model.learn(1, reset_num_timesteps=False)
+    assert_identical(strategy_state(model), before)
+    assert_updates(algo, model, 1)
