@@ -1,0 +1,41 @@
+"""The race measure of ``benchmarks/compare.py``: median time to a threshold, a missing seed counting as its budget."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import pytest
+from test_zoo import load_script
+
+
+def run(
+    seed: int, evaluations: list[tuple[float, float]], train_seconds: float, budget: float | None
+) -> dict[str, Any]:
+    """A run summary as ``load_runs`` gives it: ``(training wall-clock, mean return)`` per evaluation."""
+    rows = [{"wall_s": wall, "mean_return": ret, "env_steps": 0.0} for wall, ret in evaluations]
+    return {"seed": seed, "train_seconds": train_seconds, "budget_seconds": budget, "rows": rows}
+
+
+@pytest.fixture(scope="module")
+def time_to_threshold() -> Any:
+    return load_script("compare").time_to_threshold
+
+
+def test_median_over_seeds_counts_a_miss_as_its_budget(time_to_threshold: Any) -> None:
+    runs = [
+        run(0, [(0.0, -90.0), (1959.0, 300.8)], 1959.0, 4200.0),
+        run(1, [(0.0, -90.0), (2700.0, 291.8)], 2700.0, 2700.0),
+        run(2, [(0.0, -90.0), (1028.0, 302.5)], 1028.0, 2700.0),
+    ]
+    assert time_to_threshold(runs, 300.0) == "1,959 s median (1,959 / >2,700 / 1,028 s; 2/3 seeds)"
+
+
+def test_a_median_that_is_a_budget_is_a_lower_bound(time_to_threshold: Any) -> None:
+    runs = [
+        run(0, [(2176.0, 295.5)], 2176.0, 2400.0),
+        run(1, [(2700.0, 280.0)], 2700.0, 2700.0),
+        run(2, [(900.0, 310.0)], 900.0, 2700.0),
+    ]
+    assert time_to_threshold(runs, 300.0) == ">2,400 s median (>2,400 / >2,700 / 900 s; 1/3 seeds)"
+    # a run stopped by hand (no budget) counts as the training time it had
+    assert time_to_threshold([run(0, [(1500.0, -49.8)], 1500.0, None)], 300.0).startswith(">1,500 s median")
