@@ -32,10 +32,10 @@ def test_median_over_seeds_counts_a_miss_as_its_budget(time_to_threshold: Any) -
 
 def test_a_median_that_is_a_budget_is_a_lower_bound(time_to_threshold: Any) -> None:
     runs = [
-        run(0, [(2176.0, 295.5)], 2176.0, 2400.0),  # stopped before its budget: counts as what it trained
+        run(0, [(2176.0, 295.5)], 2176.0, 2400.0),  # ended at its step budget first: counts as its wall-clock budget
         run(1, [(2700.0, 280.0)], 2700.0, 2700.0),
         run(2, [(900.0, 310.0)], 900.0, 2700.0),
     ]
-    assert time_to_threshold(runs, 300.0) == ">2,176 s median (>2,176 / >2,700 / 900 s; 1/3 seeds)"
-    # a run stopped by hand (no budget) counts as the training time it had
+    assert time_to_threshold(runs, 300.0) == ">2,400 s median (>2,400 / >2,700 / 900 s; 1/3 seeds)"
+    # a run with no wall-clock budget (stopped by hand) counts as the training time it had
     assert time_to_threshold([run(0, [(1500.0, -49.8)], 1500.0, None)], 300.0).startswith(">1,500 s median")
