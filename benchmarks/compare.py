@@ -482,14 +482,16 @@ def aggregate(curves: list[tuple[np.ndarray, np.ndarray]], n_points: int = 200) 
     return grid, mean, low, high, std, count
 
 
-def plot_env(env_id: str, runs: list[dict[str, Any]], path: Path, band: str) -> None:
+def plot_env(env_id: str, runs: list[dict[str, Any]], path: Path, band: str, threshold: float | None = None) -> None:
     """
-    One PNG: mean return against training wall-clock, band over seeds (rl-zoo's ``all_plots`` draws env steps).
+    One PNG: mean return against training wall-clock where every seed has data, band over seeds, each seed as a thin
+    line over its whole run, and the threshold (rl-zoo's ``all_plots`` draws env steps).
 
     :param env_id: Env id (title).
     :param runs: The env's runs.
     :param path: PNG path.
     :param band: ``"minmax"`` or ``"std"``.
+    :param threshold: Return threshold, drawn dashed (None: none).
     """
     import matplotlib
 
@@ -509,6 +511,8 @@ def plot_env(env_id: str, runs: list[dict[str, Any]], path: Path, band: str) -> 
         ]
         if not curves:
             continue
+        for x, y in curves:  # each seed over its whole run, thin: a seed that stops early still shows
+            ax.plot(x, y, color=color, alpha=0.35, linewidth=0.8)
         grid, mean, low, high, std, count = aggregate(curves)
         shown = count == len(curves)  # where every seed has data: no jumps where one seed ends early
         seeds = f"{len(curves)} seed" + ("s" if len(curves) > 1 else "")
@@ -516,6 +520,8 @@ def plot_env(env_id: str, runs: list[dict[str, Any]], path: Path, band: str) -> 
         if len(curves) > 1:
             lo, hi = (low, high) if band == "minmax" else (mean - std, mean + std)
             ax.fill_between(grid[shown], lo[shown], hi[shown], color=color, alpha=0.2, linewidth=0)
+    if threshold is not None:
+        ax.axhline(threshold, color="grey", linestyle="--", linewidth=0.8)
     band_text = "min-max over seeds" if band == "minmax" else "mean ± std over seeds"
     ax.set_xlabel("training wall-clock (s), evaluations excluded")
     ax.set_ylabel("mean evaluation return")
@@ -593,8 +599,8 @@ def write_report(out: Path, runs: list[dict[str, Any]], thresholds: dict[str, fl
         by_env[run["env"]].append(run)
     for env_id, env_runs in sorted(by_env.items()):
         png = out / "plots" / f"{env_slug(env_id)}-wallclock.png"
-        plot_env(env_id, env_runs, png, band)
         threshold = thresholds.get(env_id)
+        plot_env(env_id, env_runs, png, band, threshold)
         header = "| algorithm | seeds | env steps | train wall-clock (s) | final return |"
         rule = "|---|---|---|---|---|"
         if threshold is not None:
