@@ -211,18 +211,23 @@ class Progress:
 # ---------------------------------------------------------------------------------------------- recording
 class RecordingEvalCallback(EvalCallback):
     """
-    SB3's ``EvalCallback`` that also evaluates at the start and the end of training (so every run has two
-    evaluations at least), records the training wall-clock time of each evaluation (evaluations excluded),
-    stops training at a wall-clock budget or a return threshold, and drives the progress line. The evaluations
-    go to ``<log_path>/evaluations.npz``, as with rl-zoo's ``--eval-freq``.
+    SB3's ``EvalCallback`` on a grid of env steps: at the start, at every multiple of ``eval_freq`` env steps
+    below the step budget, and at the end of training (so every run has two evaluations at least). Runs with the
+    same budget and ``eval_freq`` thus have the same number of evaluations whatever their generation (rollout)
+    size, ``n_envs`` or overshoot, as rl-zoo's ``plot_from_file --iqm`` needs (it stacks the evaluations of every
+    algorithm). It records the training wall-clock time of each evaluation (evaluations excluded), stops training
+    at a wall-clock budget or a return threshold, and drives the progress line. The evaluations go to
+    ``<log_path>/evaluations.npz``, as with rl-zoo's ``--eval-freq``.
 
     :param eval_env: Evaluation env.
-    :param eval_freq: Vec steps (callback calls) between evaluations; 0 for start and end only.
+    :param eval_freq: Env steps between evaluations; 0 for start and end only.
     :param n_eval_episodes: Episodes per evaluation.
     :param log_path: The rl-zoo run folder (``evaluations.npz`` and ``best_model.zip`` go there).
     :param budget_seconds: Stop training after this much training wall-clock (None: no limit).
     :param progress: Progress line.
     :param stop_at: Stop training once an evaluation's mean return reaches this value (None: never).
+    :param budget_steps: The env-step budget given to ``learn()``: no grid evaluation at or past it (the one at
+        the end of training takes its place, after the last generation's update).
     """
 
     def __init__(
@@ -234,19 +239,23 @@ class RecordingEvalCallback(EvalCallback):
         budget_seconds: float | None,
         progress: Progress,
         stop_at: float | None = None,
+        budget_steps: int | None = None,
     ) -> None:
         super().__init__(
             eval_env,
             n_eval_episodes=n_eval_episodes,
-            eval_freq=eval_freq,
+            eval_freq=1,  # SB3's schedule (every eval_freq calls) is replaced by the env-step grid, see _on_step
             log_path=log_path,
             best_model_save_path=log_path,
             deterministic=True,
             verbose=0,
         )
+        self.grid = max(int(eval_freq), 0)
+        self.budget_steps = budget_steps
         self.budget_seconds = budget_seconds
         self.stop_at = stop_at
         self.progress = progress
+        self.next_eval = self.grid
         #: Training wall-clock (s) and total wall-clock (s) of each evaluation, in the order of evaluations.npz.
         self.train_s: list[float] = []
         self.total_s: list[float] = []
@@ -261,30 +270,31 @@ class RecordingEvalCallback(EvalCallback):
         """
         return time.perf_counter() - self._start - self.eval_seconds
 
-    def _evaluate(self, force: bool) -> bool:
-        n_calls, eval_freq = self.n_calls, self.eval_freq
-        if force:
-            self.n_calls, self.eval_freq = 1, 1
-        due = self.eval_freq > 0 and self.n_calls % self.eval_freq == 0
+    def _grid_point_due(self) -> bool:
+        """:return: Whether ``num_timesteps`` reached the next grid point, which lies below the step budget."""
+        if self.grid <= 0 or self.num_timesteps < self.next_eval:
+            return False
+        due = self.budget_steps is None or self.next_eval < self.budget_steps
+        self.next_eval = (self.num_timesteps // self.grid + 1) * self.grid
+        return due
+
+    def _evaluate(self) -> bool:
         start = time.perf_counter()
-        try:
-            continue_training = super()._on_step()
-        finally:
-            self.n_calls, self.eval_freq = n_calls, eval_freq
-        if due:
-            self.eval_seconds += time.perf_counter() - start
-            self.train_s.append(round(self.train_seconds(), 3))
-            self.total_s.append(round(time.perf_counter() - self._start, 3))
-            self.progress.update(self.num_timesteps, self.train_seconds(), self.last_mean_reward, force=True)
+        continue_training = super()._on_step()  # eval_freq=1: evaluates now
+        self.eval_seconds += time.perf_counter() - start
+        self.train_s.append(round(self.train_seconds(), 3))
+        self.total_s.append(round(time.perf_counter() - self._start, 3))
+        self.progress.update(self.num_timesteps, self.train_seconds(), self.last_mean_reward, force=True)
         return continue_training
 
     def _on_training_start(self) -> None:
         super()._on_training_start()
         self._start = time.perf_counter()
-        self._evaluate(force=True)
+        self.next_eval = (self.num_timesteps // self.grid + 1) * self.grid if self.grid > 0 else 0
+        self._evaluate()
 
     def _on_step(self) -> bool:
-        continue_training = self._evaluate(force=False)
+        continue_training = self._evaluate() if self._grid_point_due() else True
         train_s = self.train_seconds()
         self.progress.update(self.num_timesteps, train_s, self.last_mean_reward if self.train_s else None)
         if self.budget_seconds is not None and train_s >= self.budget_seconds:
@@ -295,7 +305,7 @@ class RecordingEvalCallback(EvalCallback):
 
     def _on_training_end(self) -> None:
         if not self.evaluations_timesteps or self.evaluations_timesteps[-1] != self.num_timesteps:
-            self._evaluate(force=True)
+            self._evaluate()
         self.progress.update(self.num_timesteps, self.train_seconds(), self.last_mean_reward, force=True)
         super()._on_training_end()
 
@@ -383,12 +393,13 @@ def run_one(
     n_envs = model.get_env().num_envs  # type: ignore[union-attr]
     recorder = RecordingEvalCallback(
         manager.create_envs(1, eval_env=True),
-        eval_freq=max(eval_freq // n_envs, 1) if eval_freq > 0 else 0,
+        eval_freq=eval_freq,
         n_eval_episodes=eval_episodes,
         log_path=str(folder),
         budget_seconds=seconds,
         progress=progress,
         stop_at=stop_at,
+        budget_steps=total,
     )
     start = time.perf_counter()
     try:
@@ -638,19 +649,29 @@ def write_report(out: Path, runs: list[dict[str, Any]], thresholds: dict[str, fl
             lines.append(row)
         sources = sorted({f"{r['algo']}: {r['hyperparams_source']}" for r in env_runs})
         pickle = out / f"all_plots-{env_slug(env_id)}"
+        # rl-zoo's --iqm stacks the evaluations of every algorithm: it needs as many per run everywhere
+        n_evals = sorted({len(r["eval_timesteps"]) for r in env_runs})
+        iqm = "--iqm " if len(n_evals) == 1 else ""
         lines += [
             "",
             "Hyperparameters: " + "; ".join(sources) + ".",
             "",
             f"![{env_id}](plots/{png.name})",
             "",
-            "Curves against env steps, rl-zoo's table and rliable's IQM with bootstrap intervals:",
+            "Curves against env steps, rl-zoo's table and rliable's intervals (aggregate scores; with --iqm, the",
+            "IQM per evaluation):",
             "",
             f"    python -m sb3_es.zoo all_plots -a {' '.join(sorted(by_algo))} -e {env_id} -f {out / 'logs'} "
             f"--no-million -o {pickle}",
-            f"    python -m sb3_es.zoo plot_from_file -i {pickle}.pkl --rliable --iqm --no-million",
+            f"    python -m sb3_es.zoo plot_from_file -i {pickle}.pkl --rliable {iqm}--no-million",
             "",
         ]
+        if not iqm:
+            lines += [
+                f"(No --iqm: the runs have {' or '.join(map(str, n_evals))} evaluations, a wall-clock budget or",
+                "--stop-at-threshold having ended some early; rl-zoo's IQM curve needs the same number in every run.)",
+                "",
+            ]
     path = out / "results.md"
     path.write_text("\n".join(lines))
     return path

@@ -6,6 +6,7 @@ each algorithm keep what is specific to it; saving and loading are in ``test_sav
 
 from __future__ import annotations
 
+import copy
 import re
 from pathlib import Path
 from typing import Any
@@ -25,8 +26,8 @@ from algorithms import (
     policy_vector,
     spy_on_ask,
 )
-from envs import ConstantObsEnv, NaNRewardWrapper, counting_env
-from stable_baselines3.common.callbacks import StopTrainingOnMaxEpisodes
+from envs import ConstantObsEnv, NaNRewardWrapper, ToyEnv, counting_env, rollout
+from stable_baselines3.common.callbacks import BaseCallback, StopTrainingOnMaxEpisodes
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.evaluation import evaluate_policy
 from stable_baselines3.common.vec_env import DummyVecEnv
@@ -198,6 +199,37 @@ def test_tensorboard_log(algo: Algo, tmp_path: Path) -> None:
     assert any(p.name.startswith("events.out.tfevents") and p.stat().st_size > 0 for p in run_dir.iterdir())
     model.learn(GENERATION)  # a new run gets the next id
     assert (tmp_path / f"{algo.tb_log_name}_2").is_dir()
+
+
+@pytest.mark.parametrize("algo", POPULATION_ALGORITHMS)
+def test_idle_slots_log_the_center_policy_return(algo: Algo, tmp_path: Path) -> None:
+    """
+    ``rollout/center_return`` is the return of the center (mean) policy, run by env slots with no candidate left:
+    6 ToyEnv slots for 4 candidates. Logged when such an episode ends within the generation, equal to the center's
+    own episode (ToyEnv ignores the reset seed; the policy's observation statistics are those of the generation).
+    """
+
+    class CenterReturn(BaseCallback):
+        def __init__(self) -> None:
+            super().__init__()
+            self.expected: list[float] = []
+
+        def _on_rollout_start(self) -> None:
+            center = self.model.strategy.center.copy()
+            self.expected.append(rollout(ToyEnv(), copy.deepcopy(self.model.policy), center)[0])
+
+        def _on_step(self) -> bool:
+            return True
+
+    expected = CenterReturn()
+    model = algo.make(DummyVecEnv([ToyEnv] * 6), 4, max_episode_steps=12)
+    rows = learn_logged(model, 100, tmp_path, callback=expected)
+    assert len(rows) == len(expected.expected) >= 2
+    logged = [row.get("rollout/center_return", "") for row in rows]
+    assert logged[0] != ""  # the first center episode (no longer than the candidates') ended in the generation
+    for value, center_return in zip(logged, expected.expected):
+        if value != "":
+            assert float(value) == pytest.approx(center_return, rel=1e-6)
 
 
 # ---------------------------------------------------------------------------- environments

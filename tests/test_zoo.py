@@ -470,23 +470,27 @@ def test_compare_writes_rl_zoos_layout(tmp_path: Path, capsys: pytest.CaptureFix
     out = tmp_path / "cmp"
     threads = torch.get_num_threads()  # compare.py sets 1 thread (its default): restore it for the other tests
     try:
+        # generations of 1,600 env steps (ARS, the file's n_delta: 4) and 800 (CMA-ES): 2,000 steps take 3,200
+        # and 2,400, each within one generation of the budget
         report = compare.main(
-            ["--algos", "ars_es", "cmaes", "--envs", "Pendulum-v1", "--seeds", "0", "1", "--steps", "1600"]
+            ["--algos", "ars_es", "cmaes", "--envs", "Pendulum-v1", "--seeds", "0", "1", "--steps", "2000"]
             + ["--eval-freq", "800", "--eval-episodes", "2", "--out", str(out), "--threshold", "Pendulum-v1=-2000"]
             + ["--override", "cmaes:population_size=4"]
         )
     finally:
         torch.set_num_threads(threads)
-    for algo in ("ars_es", "cmaes"):
+    for algo, steps in (("ars_es", 3200), ("cmaes", 2400)):
         for seed in (0, 1):
             folder = out / "logs" / algo / f"Pendulum-v1_1_seed{seed}"
             evaluations = np.load(folder / "evaluations.npz")
-            assert evaluations["timesteps"][0] == 0 and evaluations["timesteps"][-1] >= 1600  # start and end
-            assert ALGOS[algo].load(folder / "Pendulum-v1.zip").num_timesteps == evaluations["timesteps"][-1]
+            # the start, the grid points below the budget, the end: as many evaluations for both algorithms
+            assert evaluations["timesteps"].tolist() == [0, 800, 1600, steps]
+            assert ALGOS[algo].load(folder / "Pendulum-v1.zip").num_timesteps == steps
     assert (out / "tb" / "Pendulum-v1" / "ARS_ES_1").is_dir() and (out / "tb" / "Pendulum-v1" / "CMAES_2").is_dir()
     assert (out / "plots" / "Pendulum-v1-wallclock.png").stat().st_size > 10_000
     text = report.read_text()
-    assert "| ars_es (ARS) | 2 (0, 1) | 1,600 |" in text and "time to return ≥ -2000" in text
+    assert "| ars_es (ARS) | 2 (0, 1) | 3,200 |" in text and "| cmaes (CMAES) | 2 (0, 1) | 2,400 |" in text
+    assert "time to return ≥ -2000" in text and "--rliable --iqm" in text
     assert compare.main(["--out", str(out), "--report-only"]).is_file()  # redrawn from the files alone
     # rl-zoo's plots read the runs: learning curves, results table, rliable's IQM and bootstrap intervals
     pytest.importorskip("rliable")
