@@ -10,11 +10,13 @@
 # Any failure stops the script with a non-zero exit status; the last lines sum up what ran and where.
 #
 # usage: benchmarks/zoo_workflow.sh [WORK_DIR]        (default WORK_DIR: a new temporary folder)
-#   PYTHON=python3      interpreter that creates the venv (the wheel is built by the venv's pip, in an isolated
-#                       build environment: setuptools comes from the package index, as in a release build).
-#   VENV=/path/to/venv  install the wheel into this existing venv instead of a new one (with NO_DEPS=1, no
-#                       dependency is resolved: for a machine without a package index, a venv that has them).
-#   NO_DEPS=1           pip install --no-deps the wheel (the [zoo] dependencies must already be in VENV).
+#   PYTHON=python3      interpreter that creates the venv. The wheel is built by the venv's pip in an isolated build
+#                       environment (setuptools from the package index, as in a release build), then installed with
+#                       pip resolving [zoo] and the pins of constraints.txt from the package index.
+#   VENV=/path/to/venv  use this existing venv instead of a new one (it replaces the sb3_es installed there): the
+#                       route for a machine without a package index, with a venv that already has the [zoo]
+#                       dependencies (pip finds them satisfied and downloads nothing) and setuptools>=77 (the
+#                       wheel is then built without build isolation).
 set -euo pipefail
 
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -34,6 +36,9 @@ if [ -z "${VENV:-}" ]; then
     step "new venv $VENV ($("$PYTHON" --version))"
     rm -rf "$VENV"
     "$PYTHON" -m venv "$VENV"
+    ISOLATION=()
+else
+    ISOLATION=(--no-build-isolation)
 fi
 PY="$VENV/bin/python"
 
@@ -43,19 +48,15 @@ mkdir -p "$WORK/src"
 # build from a copy, so that the build leaves nothing in the source tree
 cp -r "$ROOT/sb3_es" "$ROOT/pyproject.toml" "$ROOT/README.md" "$ROOT/LICENSE" "$WORK/src/"
 find "$WORK/src" -name __pycache__ -prune -exec rm -rf {} +
-"$PY" -m pip wheel --no-deps -q "$WORK/src" -w "$WORK/dist"
+"$PY" -m pip wheel --no-deps "${ISOLATION[@]}" -q "$WORK/src" -w "$WORK/dist"
 WHEEL="$(ls "$WORK"/dist/sb3_es-*.whl)"
 echo "$WHEEL"
 "$PY" -c "import sys, zipfile; names = zipfile.ZipFile(sys.argv[1]).namelist(); \
 print(*sorted(n for n in names if n.startswith('sb3_es/hyperparams/')), sep='\n')" "$WHEEL"
 
-if [ -n "${NO_DEPS:-}" ]; then
-    step "pip install --no-deps ${WHEEL##*/} into $VENV (its dependencies already there)"
-    "$PY" -m pip install -q --no-deps --force-reinstall "$WHEEL"
-else
-    step "pip install ${WHEEL##*/}[zoo] into $VENV"
-    "$PY" -m pip install -q -c "$ROOT/constraints.txt" "${WHEEL}[zoo]"
-fi
+step "pip install ${WHEEL##*/}[zoo] into $VENV"
+"$PY" -m pip install -q --force-reinstall --no-deps "$WHEEL"  # replaces an sb3_es already there (VENV=...)
+"$PY" -m pip install -q -c "$ROOT/constraints.txt" "${WHEEL}[zoo]"
 "$PY" -m pip check
 # the installed package, not the source tree, must be the one imported
 mkdir -p "$WORK/run"

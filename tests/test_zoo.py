@@ -33,6 +33,7 @@ from sb3_es.common.population_algorithm import PopulationAlgorithm  # noqa: E402
 from sb3_es.zoo import (  # noqa: E402
     ALGOS,
     HYPERPARAMS_DIR,
+    SCRIPTS,
     UsageError,
     default_conf_file,
     main,
@@ -554,6 +555,16 @@ def test_docs_walk_through_the_workflow() -> None:
     for command in ("train", "enjoy", "record_video", "record_training", "push_to_hub", "load_from_hub", "-optimize"):
         assert command in guide
     assert "all_plots" in guide and "plot_from_file" in guide
+    # the script that runs the workflow from a built wheel runs every command, and the guide shows its commands
+    script = (ROOT / "benchmarks" / "zoo_workflow.sh").read_text()
+    ran = set(re.findall(r"^\s*(?:MPLBACKEND=Agg )?zoo (\w+)", script, re.MULTILINE))
+    ran |= set(re.findall(r"/sb3-es\" (\w+)", script))
+    assert {"train", "enjoy", "record_video", "record_training", "plot_train", "all_plots", "plot_from_file"} <= ran
+    assert ran <= set(SCRIPTS) and "-optimize --n-trials 2" in script
+    section = guide.split("## The whole workflow from a built wheel")[1]
+    for command in ran:
+        assert re.search(rf"(python -m sb3_es\.zoo|sb3-es) {command} ", section), command
+    assert "-optimize --n-trials 2" in section and "PLACEHOLDER" not in guide and "WORKFLOW_RUN" not in guide
     # which curve to hold against PPO
     assert "`rollout/ep_rew_mean` averages the perturbed candidates" in guide
     assert "`eval/mean_reward`" in guide
