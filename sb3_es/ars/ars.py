@@ -2,17 +2,18 @@
 
 from __future__ import annotations
 
-from typing import Any, ClassVar, TypeVar
+from typing import Any, TypeVar
 
 import numpy as np
 import torch as th
-from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
 
-from sb3_es.ars.policies import FlatPolicy, LinearPolicy, MlpPolicy
+from sb3_es.ars.policies import FlatPolicy
+from sb3_es.common.arguments import base_arguments
 from sb3_es.common.base_class import constant_value
 from sb3_es.common.population_algorithm import (
     PopulationAlgorithm,
+    check_noise_table_size,
     check_positive,
     initial_value,
     make_noise_table,
@@ -32,40 +33,15 @@ class ARS(PopulationAlgorithm):
     normalize_observations=False)``, V2 (the default) normalizes observations inside the policy, and
     the ``-t`` variants use ``n_top < n_delta``.
 
-    :param policy: ``"LinearPolicy"``, ``"MlpPolicy"`` or a :class:`~sb3_es.common.policies.FlatPolicy` class.
-    :param env: Environment, env id or VecEnv; each env slot evaluates a different candidate.
     :param n_delta: Number of random directions per generation (``2 * n_delta`` candidates).
     :param n_top: Number of best directions used in the update (``b`` in the paper); defaults to ``n_delta``.
     :param learning_rate: Step size ``alpha``, a float or a schedule.
     :param delta_std: Exploration noise ``nu``, a float or a schedule.
-    :param zero_policy: Start with the output layer at zero (hidden layers keep their random initialization; a
-        linear policy starts all-zero, as in the ARS paper).
-    :param alive_bonus_offset: Added to the fitness once per step, to cancel alive bonuses (e.g. -1 on Hopper).
-    :param reward_clip: Clip each step's reward to ``(low, high)`` in the fitness only (``None``: no clipping).
-    :param terminal_reward: In the fitness only, replace the reward of an episode's terminating step (e.g. ``0`` for
-        BipedalWalker's -100 fall penalty); ``None`` keeps it. See :class:`~sb3_es.evaluation.RewardShaping`.
-    :param n_eval_episodes: Episodes per candidate.
-    :param policy_kwargs: Keyword arguments for the policy (``net_arch``, ``normalize_observations``, ...).
-    :param stats_window_size: Number of episodes averaged in ``rollout/ep_rew_mean``.
-    :param tensorboard_log: TensorBoard log directory.
-    :param seed: Random seed.
-    :param verbose: 0 none, 1 training information, 2 debug.
-    :param device: Torch device (the CPU is the right choice for these policies).
-    :param evaluator: ``"local"``, ``"processes"`` (one worker process per CPU), ``"ray"`` or a
-        :class:`~sb3_es.evaluation.PopulationEvaluator`; not saved.
-    :param noise_table_size: Read perturbations from a shared noise table of this many float32 values (e.g.
-        ``2**24``) instead of drawing them fresh, so that a Ray evaluator sends an offset per candidate
-        rather than a parameter vector. ``None`` (default) draws them fresh.
-    :param max_episode_steps: Longest episode training runs, in env steps (an episode reaching it is truncated);
-        ``None``: the env's ``TimeLimit``, or 1000 steps, with a warning, for an env without one.
-    :param _init_setup_model: Whether to build the model at construction.
+    :param noise_table_size: Size of the shared noise table to read perturbations from (``None``: drawn fresh).
+
+    The other parameters are those of :class:`~sb3_es.common.population_algorithm.PopulationAlgorithm`.
     """
 
-    policy_aliases: ClassVar[dict[str, type[BasePolicy]]] = {
-        "MlpPolicy": MlpPolicy,
-        "LinearPolicy": LinearPolicy,
-        "MultiInputPolicy": MlpPolicy,
-    }
     strategy: ARSStrategy
     scheduled_hyperparameters = ("learning_rate", "delta_std")
     strategy_hyperparameters = ("n_delta", "n_top")
@@ -101,30 +77,11 @@ class ARS(PopulationAlgorithm):
             raise ValueError(f"n_top={n_top} must be an integer between 1 and n_delta={n_delta}.")
         delta_std = constant_value(delta_std)
         check_positive("delta_std", delta_std)
-        super().__init__(
-            policy,
-            env,
-            learning_rate=learning_rate,
-            n_eval_episodes=n_eval_episodes,
-            alive_bonus_offset=alive_bonus_offset,
-            reward_clip=reward_clip,
-            terminal_reward=terminal_reward,
-            zero_policy=zero_policy,
-            policy_kwargs=policy_kwargs,
-            stats_window_size=stats_window_size,
-            tensorboard_log=tensorboard_log,
-            seed=seed,
-            verbose=verbose,
-            device=device,
-            evaluator=evaluator,
-            max_episode_steps=max_episode_steps,
-        )
+        super().__init__(**base_arguments(super().__init__, locals()))
         self.n_delta = int(n_delta)
         self.n_top = int(n_top)
         self.delta_std = delta_std
-        if noise_table_size is not None and int(noise_table_size) < 1:
-            raise ValueError(f"noise_table_size={noise_table_size}: use a positive size or None.")
-        self.noise_table_size = noise_table_size
+        self.noise_table_size = check_noise_table_size(noise_table_size)
         if _init_setup_model:
             self._setup_model()
 

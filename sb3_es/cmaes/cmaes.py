@@ -10,6 +10,7 @@ import torch as th
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback
 
 from sb3_es.cmaes.policies import FlatPolicy
+from sb3_es.common.arguments import base_arguments
 from sb3_es.common.checks import check_non_negative
 from sb3_es.common.population_algorithm import PopulationAlgorithm, check_positive
 from sb3_es.evaluation import PopulationEvaluator
@@ -27,8 +28,6 @@ class CMAES(PopulationAlgorithm):
     per generation is linear in the number of parameters instead of cubic. When pycma's stop
     conditions fire, training ends (logged under ``train/stop_*``) or restarts (IPOP/BIPOP).
 
-    :param policy: ``"MlpPolicy"``, ``"LinearPolicy"`` or a :class:`~sb3_es.common.policies.FlatPolicy` class.
-    :param env: Environment, env id or VecEnv; each env slot evaluates a different candidate.
     :param sigma: Initial step size ``sigma0``.
     :param population_size: Candidates per generation; ``None`` for pycma's default ``4 + 3 ln(n)``.
     :param diagonal: ``True`` for separable (diagonal) CMA-ES, ``False`` for full covariance, ``"auto"``
@@ -36,24 +35,8 @@ class CMAES(PopulationAlgorithm):
     :param restarts: ``None``, ``"ipop"`` or ``"bipop"``.
     :param max_restarts: Maximum number of restarts.
     :param cma_options: Other pycma options, passed through.
-    :param zero_policy: Start with the output layer at zero (hidden layers keep their random initialization; a
-        linear policy starts all-zero, as in the ARS paper).
-    :param alive_bonus_offset: Added to the fitness once per step.
-    :param reward_clip: Clip each step's reward to ``(low, high)`` in the fitness only (``None``: no clipping).
-    :param terminal_reward: In the fitness only, replace the reward of an episode's terminating step (e.g. ``0`` for
-        BipedalWalker's -100 fall penalty); ``None`` keeps it. See :class:`~sb3_es.evaluation.RewardShaping`.
-    :param n_eval_episodes: Episodes per candidate.
-    :param policy_kwargs: Keyword arguments for the policy.
-    :param stats_window_size: Episodes averaged in ``rollout/ep_rew_mean``.
-    :param tensorboard_log: TensorBoard log directory.
-    :param seed: Random seed.
-    :param verbose: Verbosity.
-    :param device: Torch device.
-    :param evaluator: ``"local"``, ``"processes"`` (one worker process per CPU), ``"ray"`` or a
-        :class:`~sb3_es.evaluation.PopulationEvaluator`; not saved.
-    :param max_episode_steps: Longest episode training runs, in env steps (an episode reaching it is truncated);
-        ``None``: the env's ``TimeLimit``, or 1000 steps, with a warning, for an env without one.
-    :param _init_setup_model: Whether to build the model at construction.
+
+    The other parameters are those of :class:`~sb3_es.common.population_algorithm.PopulationAlgorithm`.
     """
 
     #: Above this many parameters, ``diagonal="auto"`` picks separable CMA-ES.
@@ -90,23 +73,7 @@ class CMAES(PopulationAlgorithm):
         check_non_negative("max_restarts", max_restarts, integer=True)
         if diagonal not in (True, False, "auto"):
             raise ValueError(f"diagonal={diagonal!r}: choose True, False or 'auto'.")
-        super().__init__(
-            policy,
-            env,
-            n_eval_episodes=n_eval_episodes,
-            alive_bonus_offset=alive_bonus_offset,
-            reward_clip=reward_clip,
-            terminal_reward=terminal_reward,
-            zero_policy=zero_policy,
-            policy_kwargs=policy_kwargs,
-            stats_window_size=stats_window_size,
-            tensorboard_log=tensorboard_log,
-            seed=seed,
-            verbose=verbose,
-            device=device,
-            evaluator=evaluator,
-            max_episode_steps=max_episode_steps,
-        )
+        super().__init__(**base_arguments(super().__init__, locals()))
         self.sigma = sigma
         self.population_size = population_size
         self.diagonal = diagonal

@@ -1,11 +1,9 @@
-"""The SB3 glue shared by every population method: learn loop, callbacks, logging, save/load."""
+"""The training loop shared by every population method: generations of ask, evaluate, tell, with SB3's
+callbacks and logger."""
 
 from __future__ import annotations
 
-import io
-import pathlib
 import warnings
-from abc import abstractmethod
 from typing import Any, ClassVar, TypeVar
 
 import numpy as np
@@ -14,45 +12,35 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
 
+from sb3_es.common.arguments import base_arguments
 from sb3_es.common.base_class import ESBaseAlgorithm
-from sb3_es.common.checks import check_positive, check_scheduled_value
+from sb3_es.common.checks import check_positive
 from sb3_es.common.evaluator_choice import check_evaluator, resolve_evaluator
 from sb3_es.common.policies import FlatPolicy, LinearPolicy, MlpPolicy
+from sb3_es.common.strategy_algorithm import (
+    StrategyAlgorithm,
+    check_noise_table_size,
+    initial_value,
+    make_noise_table,
+)
 from sb3_es.evaluation import PopulationEvaluator, PopulationResult, RewardShaping
-from sb3_es.strategies import Strategy
-from sb3_es.strategies.base import Population
-from sb3_es.strategies.noise import SharedNoiseTable
 
 SelfPopulationAlgorithm = TypeVar("SelfPopulationAlgorithm", bound="PopulationAlgorithm")
 
-__all__ = ["PopulationAlgorithm", "check_positive", "make_noise_table"]
+__all__ = [
+    "PopulationAlgorithm",
+    "check_noise_table_size",
+    "check_positive",
+    "initial_value",
+    "make_noise_table",
+]
 
 
-def initial_value(value: float | Schedule) -> float:
-    """
-    :param value: A float or a schedule ``progress_remaining -> value``.
-    :return: The value at the start of training (a strategy is built with it; a schedule then takes over).
-    """
-    return float(value(1.0) if callable(value) else value)
-
-
-def make_noise_table(size: int | None, seed: np.random.SeedSequence) -> SharedNoiseTable | None:
-    """
-    Build the shared noise table of a strategy, if one was asked for.
-
-    :param size: Number of float32 values, or ``None`` for no table (directions drawn fresh).
-    :param seed: Seed sequence of the strategy (the table's seed is derived from it).
-    :return: The table, or ``None``.
-    """
-    if size is None:
-        return None
-    return SharedNoiseTable(size, seed=int(seed.generate_state(1)[0]))
-
-
-class PopulationAlgorithm(ESBaseAlgorithm):
+class PopulationAlgorithm(StrategyAlgorithm):
     """
     Base class of the population methods (ARS, OpenES, CMA-ES, PGPE, SimpleES): an algorithm is mostly its
-    strategy.
+    strategy. Each one adds its strategy's hyperparameters to the parameters below (documented here once) and
+    builds its strategy (:meth:`~sb3_es.common.strategy_algorithm.StrategyAlgorithm._make_strategy`).
 
     Each generation: scheduled hyperparameters are written into the strategy (``scheduled_hyperparameters``),
     the strategy proposes candidates (``ask``), the evaluator runs them on the
@@ -93,18 +81,13 @@ class PopulationAlgorithm(ESBaseAlgorithm):
         :class:`~sb3_es.evaluation.ray.RayEvaluator`) or a :class:`~sb3_es.evaluation.PopulationEvaluator`
         instance. ``"processes"`` and ``"ray"`` build their workers' envs from ``env``, which must then be an env
         id. Not saved with the model.
+    :param noise_table_size: (ARS, OpenES and SimpleES, whose strategies draw Gaussian directions; not a parameter of
+        this base class) Read the perturbations from a shared noise table of this many float32 values (e.g.
+        ``2**24``) instead of drawing them fresh, so that a Ray evaluator sends an offset per candidate rather than a
+        parameter vector. ``None`` (default) draws them fresh.
     :param _init_setup_model: Whether to build the model at construction.
     """
 
-    policy: FlatPolicy
-    #: Hyperparameters that may be SB3 schedules: each names an attribute of the algorithm (a float or a
-    #: schedule ``progress_remaining -> value``) and the strategy attribute of the same name. The strategy is
-    #: built with the starting value; a schedule is then evaluated, checked and written into the strategy at
-    #: the start of every generation (the one place where anything outside a strategy changes it).
-    scheduled_hyperparameters: ClassVar[tuple[str, ...]] = ()
-    #: Hyperparameters the strategy keeps under the same name and that ``load()`` may change: the strategy checks
-    #: the new values (``Strategy.check_settings``) and uses them from the next generation on.
-    strategy_hyperparameters: ClassVar[tuple[str, ...]] = ()
     _live_hyperparameters: ClassVar[tuple[str, ...]] = (
         *ESBaseAlgorithm._live_hyperparameters,
         "n_eval_episodes",
@@ -142,18 +125,7 @@ class PopulationAlgorithm(ESBaseAlgorithm):
     ) -> None:
         # Env id, for evaluator="processes" or "ray" (each worker builds its envs from it); not saved.
         self._env_id = env if isinstance(env, str) else None
-        super().__init__(
-            policy,
-            env,
-            learning_rate,
-            policy_kwargs,
-            stats_window_size,
-            tensorboard_log,
-            verbose,
-            device,
-            seed,
-            max_episode_steps=max_episode_steps,
-        )
+        super().__init__(**base_arguments(super().__init__, locals()))
         if int(n_eval_episodes) != n_eval_episodes or n_eval_episodes < 1:
             raise ValueError(f"n_eval_episodes={n_eval_episodes}: it must be a positive integer.")
         if learning_rate is not None:
@@ -164,102 +136,12 @@ class PopulationAlgorithm(ESBaseAlgorithm):
         self.reward_clip = shaping.reward_clip
         self.terminal_reward = shaping.terminal_reward
         self.zero_policy = zero_policy
-        self.strategy: Strategy | None = None
-        self._env_rng: np.random.Generator | None = None
+        self.strategy = None
+        self._env_rng = None
         check_evaluator(evaluator, self._env_id)
         self.evaluator = evaluator
         self._evaluator: PopulationEvaluator | None = None
         self._stop_training = False
-
-    # ------------------------------------------------------------------ model
-    def _setup_model(self) -> None:
-        if self.learning_rate is not None:
-            self._setup_lr_schedule()  # SB3's lr_schedule attribute, as in SB3; _ask() applies the schedule
-        self.set_random_seed(self.seed)
-        policy = self.policy_class(self.observation_space, self.action_space, **self.policy_kwargs)
-        if not isinstance(policy, FlatPolicy):
-            raise TypeError(f"{self._algorithm_name} needs a FlatPolicy subclass, got {type(policy).__name__}.")
-        self.policy = policy.to(self.device)
-        if self.strategy is None:  # a loaded model brings its strategy (and its random state)
-            strategy_seed, env_seed = np.random.SeedSequence(self.seed).spawn(2)
-            center = self.policy.parameters_to_vector()
-            if self.zero_policy:
-                center[self.policy.output_layer_slice()] = 0.0
-            self.strategy = self._make_strategy(center, strategy_seed)
-            self._env_rng = np.random.default_rng(env_seed)
-        elif self.strategy.restored_legacy_state:
-            self._upgrade_legacy_strategy()
-            self.strategy.state_version = self.strategy.STATE_VERSION
-        self.policy.load_from_vector(self.strategy.center)
-
-    @abstractmethod
-    def _make_strategy(self, center: np.ndarray, seed: np.random.SeedSequence) -> Strategy:
-        """
-        Build the strategy.
-
-        :param center: Initial parameters.
-        :param seed: Seed for the strategy's random generator.
-        :return: The strategy.
-        """
-
-    def _upgrade_legacy_strategy(self) -> None:
-        """
-        A strategy saved before version 2 had hyperparameters that the algorithm overwrote every generation:
-        give it the algorithm's values (a schedule is applied at the next generation anyway).
-        """
-        for name in self.scheduled_hyperparameters:
-            value = getattr(self, name)
-            if not callable(value):
-                setattr(self.strategy, name, float(value))
-
-    @classmethod
-    def _applicable_on_load(cls) -> set[str]:
-        return super()._applicable_on_load() | set(cls.scheduled_hyperparameters) | set(cls.strategy_hyperparameters)
-
-    def _apply_hyperparameters(self, changed: dict[str, Any]) -> None:
-        """
-        Hand the loaded strategy the hyperparameters that ``load()`` changed: a number for a scheduled one (a
-        schedule is written into it at every generation anyway) and the strategy-held ones; the strategy checks
-        them. The others (:attr:`_live_hyperparameters`) are read from the model at every generation.
-
-        :param changed: ``name -> new value``.
-        """
-        assert self.strategy is not None
-        shaping = self.reward_shaping  # checks reward_clip, terminal_reward and alive_bonus_offset
-        self.reward_clip, self.terminal_reward = shaping.reward_clip, shaping.terminal_reward
-        for name, value in changed.items():
-            if name in self.scheduled_hyperparameters and not callable(value):
-                check_positive(name, value)
-                setattr(self.strategy, name, float(value))
-            elif name in self.strategy_hyperparameters:
-                setattr(self.strategy, name, value)
-        self.strategy.check_settings()
-
-    def _ask(self) -> Population:
-        """
-        Write this generation's value of every scheduled hyperparameter into the strategy, then ask it.
-
-        :return: The candidates ``(population_size, num_params)``.
-        """
-        assert self.strategy is not None
-        progress = self._current_progress_remaining
-        for name in self.scheduled_hyperparameters:
-            schedule = getattr(self, name)
-            if callable(schedule):
-                value = float(schedule(progress))
-                # A step size may reach 0 (no update); a noise scale (sigma, delta_std) must stay positive.
-                check_scheduled_value(name, value, progress, allow_zero=name == "learning_rate")
-                setattr(self.strategy, name, value)
-        return self.strategy.ask()
-
-    @property
-    def best_params(self) -> np.ndarray:
-        """
-        :return: Parameters of the best candidate seen (with ``forget_best``, of the latest generation); its
-            fitness is ``strategy.best_fitness``. Load them with ``policy.load_from_vector``.
-        """
-        assert self.strategy is not None
-        return self.strategy.best_params
 
     @property
     def reward_shaping(self) -> RewardShaping:
@@ -268,29 +150,13 @@ class PopulationAlgorithm(ESBaseAlgorithm):
             getattr(self, "reward_clip", None), getattr(self, "terminal_reward", None), self.alive_bonus_offset
         )
 
+    def _apply_hyperparameters(self, changed: dict[str, Any]) -> None:
+        shaping = self.reward_shaping  # checks reward_clip, terminal_reward and alive_bonus_offset
+        self.reward_clip, self.terminal_reward = shaping.reward_clip, shaping.terminal_reward
+        super()._apply_hyperparameters(changed)
+
     def _excluded_save_params(self) -> list[str]:
         return [*super()._excluded_save_params(), "evaluator", "_evaluator", "_env_id"]
-
-    def set_parameters(
-        self,
-        load_path_or_dict: str | dict[str, th.Tensor],
-        exact_match: bool = True,
-        device: th.device | str = "auto",
-    ) -> None:
-        super().set_parameters(load_path_or_dict, exact_match=exact_match, device=device)
-        # Keep the strategy's center in step with weights written into the policy from outside.
-        assert self.strategy is not None
-        vector = self.policy.parameters_to_vector()
-        if not np.array_equal(vector.astype(np.float32), self.strategy.center.astype(np.float32)):
-            self.strategy.set_center(vector)
-
-    @classmethod
-    def _check_save_data(cls, path: str | pathlib.Path | io.BufferedIOBase, data: dict[str, Any]) -> None:
-        if not isinstance(data.get("strategy"), Strategy):
-            raise ValueError(
-                f"Cannot load {path!r}: the saved strategy state could not be read (the file is damaged or was "
-                "written by an incompatible version), so training could not continue where it stopped."
-            )
 
     # ------------------------------------------------------------------ training
     def _get_evaluator(self) -> PopulationEvaluator:

@@ -8,10 +8,12 @@ import numpy as np
 import torch as th
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
 
+from sb3_es.common.arguments import base_arguments
 from sb3_es.common.base_class import constant_value
 from sb3_es.common.checks import check_non_negative
 from sb3_es.common.population_algorithm import (
     PopulationAlgorithm,
+    check_noise_table_size,
     check_positive,
     initial_value,
     make_noise_table,
@@ -30,8 +32,6 @@ class OpenES(PopulationAlgorithm):
     centered-rank fitness shaping, weight decay, Adam, SGD or ClipUp on the mean, decaying noise and step
     size, and tracking of the best candidate.
 
-    :param policy: ``"MlpPolicy"``, ``"LinearPolicy"`` or a :class:`~sb3_es.common.policies.FlatPolicy` class.
-    :param env: Environment, env id or VecEnv; each env slot evaluates a different candidate.
     :param population_size: Candidates per generation (even with ``antithetic``).
     :param sigma: Noise standard deviation: a float (decayed by ``sigma_decay`` down to ``sigma_limit``)
         or an SB3 schedule (then ``sigma_decay`` must be 1: the schedule sets every generation's value).
@@ -50,27 +50,9 @@ class OpenES(PopulationAlgorithm):
     :param max_speed: ClipUp's largest step (``None``: twice the initial learning rate); ClipUp only.
     :param weight_decay: L2 coefficient on the mean.
     :param forget_best: Track only the latest generation's best candidate.
-    :param zero_policy: Start with the output layer at zero (hidden layers keep their random initialization; a
-        linear policy starts all-zero, as in the ARS paper).
-    :param alive_bonus_offset: Added to the fitness once per step.
-    :param reward_clip: Clip each step's reward to ``(low, high)`` in the fitness only (``None``: no clipping).
-    :param terminal_reward: In the fitness only, replace the reward of an episode's terminating step (e.g. ``0`` for
-        BipedalWalker's -100 fall penalty); ``None`` keeps it. See :class:`~sb3_es.evaluation.RewardShaping`.
-    :param n_eval_episodes: Episodes per candidate.
-    :param policy_kwargs: Keyword arguments for the policy.
-    :param stats_window_size: Episodes averaged in ``rollout/ep_rew_mean``.
-    :param tensorboard_log: TensorBoard log directory.
-    :param seed: Random seed.
-    :param verbose: Verbosity.
-    :param device: Torch device.
-    :param evaluator: ``"local"``, ``"processes"`` (one worker process per CPU), ``"ray"`` or a
-        :class:`~sb3_es.evaluation.PopulationEvaluator`; not saved.
-    :param noise_table_size: Read perturbations from a shared noise table of this many float32 values (e.g.
-        ``2**24``) instead of drawing them fresh, so that a Ray evaluator sends an offset per candidate
-        rather than a parameter vector. ``None`` (default) draws them fresh.
-    :param max_episode_steps: Longest episode training runs, in env steps (an episode reaching it is truncated);
-        ``None``: the env's ``TimeLimit``, or 1000 steps, with a warning, for an env without one.
-    :param _init_setup_model: Whether to build the model at construction.
+    :param noise_table_size: Size of the shared noise table to read perturbations from (``None``: drawn fresh).
+
+    The other parameters are those of :class:`~sb3_es.common.population_algorithm.PopulationAlgorithm`.
     """
 
     strategy: OpenESStrategy
@@ -141,24 +123,7 @@ class OpenES(PopulationAlgorithm):
                     f"{name}_decay={rate} decays a float {name}, but {name} is a schedule, which sets every "
                     f"generation's value itself: put the decay into the schedule, or pass a float {name}."
                 )
-        super().__init__(
-            policy,
-            env,
-            learning_rate=learning_rate,
-            n_eval_episodes=n_eval_episodes,
-            alive_bonus_offset=alive_bonus_offset,
-            reward_clip=reward_clip,
-            terminal_reward=terminal_reward,
-            zero_policy=zero_policy,
-            policy_kwargs=policy_kwargs,
-            stats_window_size=stats_window_size,
-            tensorboard_log=tensorboard_log,
-            seed=seed,
-            verbose=verbose,
-            device=device,
-            evaluator=evaluator,
-            max_episode_steps=max_episode_steps,
-        )
+        super().__init__(**base_arguments(super().__init__, locals()))
         self.population_size = population_size
         self.sigma = sigma
         self.sigma_decay = sigma_decay
@@ -172,9 +137,7 @@ class OpenES(PopulationAlgorithm):
         self.max_speed = max_speed
         self.weight_decay = weight_decay
         self.forget_best = forget_best
-        if noise_table_size is not None and int(noise_table_size) < 1:
-            raise ValueError(f"noise_table_size={noise_table_size}: use a positive size or None.")
-        self.noise_table_size = noise_table_size
+        self.noise_table_size = check_noise_table_size(noise_table_size)
         if _init_setup_model:
             self._setup_model()
 

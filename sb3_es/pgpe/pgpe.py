@@ -8,6 +8,7 @@ import numpy as np
 import torch as th
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback
 
+from sb3_es.common.arguments import base_arguments
 from sb3_es.common.population_algorithm import PopulationAlgorithm, check_positive
 from sb3_es.evaluation import PopulationEvaluator
 from sb3_es.pgpe.policies import FlatPolicy
@@ -25,8 +26,6 @@ class PGPE(PopulationAlgorithm):
     symmetric sampling, one adaptive standard deviation per parameter with a bounded relative change, and
     centered-rank fitness shaping. See :class:`~sb3_es.strategies.PGPEStrategy` for the update.
 
-    :param policy: ``"MlpPolicy"``, ``"LinearPolicy"`` or a :class:`~sb3_es.common.policies.FlatPolicy` class.
-    :param env: Environment, env id or VecEnv; each env slot evaluates a different candidate.
     :param population_size: Candidates per generation (even: symmetric pairs).
     :param stdev_init: Initial standard deviation of every parameter.
     :param max_speed: ClipUp's largest step (norm of the velocity), a distance in parameter space; ``None``:
@@ -38,24 +37,8 @@ class PGPE(PopulationAlgorithm):
     :param optimizer: ``"clipup"`` (default), ``"adam"`` or ``"sgd"`` for the center.
     :param momentum: ClipUp's (and SGD's) momentum.
     :param fitness_shaping: ``"centered_rank"`` (default), ``"zscore"`` or ``"raw"``.
-    :param zero_policy: Start with the output layer at zero (hidden layers keep their random initialization; a
-        linear policy starts all-zero, as in the ARS paper).
-    :param alive_bonus_offset: Added to the fitness once per step.
-    :param reward_clip: Clip each step's reward to ``(low, high)`` in the fitness only (``None``: no clipping).
-    :param terminal_reward: In the fitness only, replace the reward of an episode's terminating step (e.g. ``0`` for
-        BipedalWalker's -100 fall penalty); ``None`` keeps it. See :class:`~sb3_es.evaluation.RewardShaping`.
-    :param n_eval_episodes: Episodes per candidate.
-    :param policy_kwargs: Keyword arguments for the policy.
-    :param stats_window_size: Episodes averaged in ``rollout/ep_rew_mean``.
-    :param tensorboard_log: TensorBoard log directory.
-    :param seed: Random seed.
-    :param verbose: Verbosity.
-    :param device: Torch device.
-    :param evaluator: ``"local"``, ``"processes"`` (one worker process per CPU), ``"ray"`` or a
-        :class:`~sb3_es.evaluation.PopulationEvaluator`; not saved.
-    :param max_episode_steps: Longest episode training runs, in env steps (an episode reaching it is truncated);
-        ``None``: the env's ``TimeLimit``, or 1000 steps, with a warning, for an env without one.
-    :param _init_setup_model: Whether to build the model at construction.
+
+    The other parameters are those of :class:`~sb3_es.common.population_algorithm.PopulationAlgorithm`.
     """
 
     strategy: PGPEStrategy
@@ -100,23 +83,7 @@ class PGPE(PopulationAlgorithm):
                 f"optimizer={optimizer!r}: pass center_learning_rate (None means max_speed / 2, a ClipUp setting) "
                 "and no max_speed (ClipUp's speed limit)."
             )
-        super().__init__(
-            policy,
-            env,
-            n_eval_episodes=n_eval_episodes,
-            alive_bonus_offset=alive_bonus_offset,
-            reward_clip=reward_clip,
-            terminal_reward=terminal_reward,
-            zero_policy=zero_policy,
-            policy_kwargs=policy_kwargs,
-            stats_window_size=stats_window_size,
-            tensorboard_log=tensorboard_log,
-            seed=seed,
-            verbose=verbose,
-            device=device,
-            evaluator=evaluator,
-            max_episode_steps=max_episode_steps,
-        )
+        super().__init__(**base_arguments(super().__init__, locals()))
         self.population_size = population_size
         self.stdev_init = stdev_init
         self.max_speed = max_speed

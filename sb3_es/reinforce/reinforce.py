@@ -15,6 +15,7 @@ from stable_baselines3.common.utils import obs_as_tensor
 from stable_baselines3.common.vec_env import VecEnv
 from torch.nn import functional as F
 
+from sb3_es.common.arguments import base_arguments
 from sb3_es.common.base_class import ESBaseAlgorithm
 from sb3_es.common.checks import check_positive, check_scheduled_value
 from sb3_es.evaluation.time_limit import end_capped_episodes
@@ -166,18 +167,7 @@ class REINFORCE(ESBaseAlgorithm):
             raise ValueError("Pass use_baseline to REINFORCE, not in policy_kwargs.")
         if env is not None and not isinstance(env, str) and hasattr(env, "action_space"):
             check_action_space(env.action_space)
-        super().__init__(
-            policy,
-            env,
-            learning_rate,
-            policy_kwargs,
-            stats_window_size,
-            tensorboard_log,
-            verbose,
-            device,
-            seed,
-            max_episode_steps=max_episode_steps,
-        )
+        super().__init__(**base_arguments(super().__init__, locals()))
         if self.env is not None:
             check_action_space(self.action_space)
         self.n_episodes = int(n_episodes)

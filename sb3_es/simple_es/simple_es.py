@@ -9,8 +9,10 @@ import numpy as np
 import torch as th
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
 
+from sb3_es.common.arguments import base_arguments
 from sb3_es.common.population_algorithm import (
     PopulationAlgorithm,
+    check_noise_table_size,
     check_positive,
     initial_value,
     make_noise_table,
@@ -30,32 +32,13 @@ class SimpleES(PopulationAlgorithm):
     - **WinnerES** (the default, ``n_elite=1``): the center moves to the best child.
     - **Weighted average of the top n children**: ``n_elite=n``, with rank-based ``weights``.
 
-    :param policy: ``"MlpPolicy"``, ``"LinearPolicy"`` or a :class:`~sb3_es.common.policies.FlatPolicy` class.
-    :param env: Environment, env id or VecEnv; each env slot evaluates a different candidate.
     :param population_size: Children per generation.
     :param sigma: Standard deviation of the children, a float or an SB3 schedule.
     :param n_elite: Number of best children averaged (1: WinnerES).
     :param weights: ``"log"`` (CMA-ES's recombination weights, the default), ``"linear"`` or ``"equal"``.
-    :param zero_policy: Start with the output layer at zero (hidden layers keep their random initialization; a
-        linear policy starts all-zero, as in the ARS paper).
-    :param alive_bonus_offset: Added to the fitness once per step.
-    :param reward_clip: Clip each step's reward to ``(low, high)`` in the fitness only (``None``: no clipping).
-    :param terminal_reward: In the fitness only, replace the reward of an episode's terminating step; ``None``
-        keeps it. See :class:`~sb3_es.evaluation.RewardShaping`.
-    :param n_eval_episodes: Episodes per candidate.
-    :param policy_kwargs: Keyword arguments for the policy.
-    :param stats_window_size: Episodes averaged in ``rollout/ep_rew_mean``.
-    :param tensorboard_log: TensorBoard log directory.
-    :param seed: Random seed.
-    :param verbose: Verbosity.
-    :param device: Torch device.
-    :param evaluator: ``"local"``, ``"processes"`` (one worker process per CPU), ``"ray"`` or a
-        :class:`~sb3_es.evaluation.PopulationEvaluator`; not saved.
-    :param noise_table_size: Read perturbations from a shared noise table of this many float32 values instead of
-        drawing them fresh (a Ray evaluator then sends an offset per candidate). ``None`` (default) draws them fresh.
-    :param max_episode_steps: Longest episode training runs, in env steps (an episode reaching it is truncated);
-        ``None``: the env's ``TimeLimit``, or 1000 steps, with a warning, for an env without one.
-    :param _init_setup_model: Whether to build the model at construction.
+    :param noise_table_size: Size of the shared noise table to read perturbations from (``None``: drawn fresh).
+
+    The other parameters are those of :class:`~sb3_es.common.population_algorithm.PopulationAlgorithm`.
     """
 
     strategy: SimpleESStrategy
@@ -87,30 +70,12 @@ class SimpleES(PopulationAlgorithm):
         _init_setup_model: bool = True,
     ) -> None:
         check_positive("sigma", sigma)
-        if noise_table_size is not None and int(noise_table_size) < 1:
-            raise ValueError(f"noise_table_size={noise_table_size}: use a positive size or None.")
-        super().__init__(
-            policy,
-            env,
-            n_eval_episodes=n_eval_episodes,
-            alive_bonus_offset=alive_bonus_offset,
-            reward_clip=reward_clip,
-            terminal_reward=terminal_reward,
-            zero_policy=zero_policy,
-            policy_kwargs=policy_kwargs,
-            stats_window_size=stats_window_size,
-            tensorboard_log=tensorboard_log,
-            seed=seed,
-            verbose=verbose,
-            device=device,
-            evaluator=evaluator,
-            max_episode_steps=max_episode_steps,
-        )
+        super().__init__(**base_arguments(super().__init__, locals()))
         self.population_size = population_size
         self.sigma = sigma
         self.n_elite = n_elite
         self.weights: EliteWeights = weights
-        self.noise_table_size = noise_table_size
+        self.noise_table_size = check_noise_table_size(noise_table_size)
         if _init_setup_model:
             self._setup_model()
 

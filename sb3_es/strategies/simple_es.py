@@ -53,8 +53,9 @@ class SimpleESStrategy(Strategy):
     :param n_elite: Number of best children averaged (1: WinnerES).
     :param weights: ``"log"`` (default), ``"linear"`` or ``"equal"``; see :func:`elite_weights`.
     :param seed: Seed of the random generator.
-    :param noise_table: Read the perturbations from this shared table (``ask()`` then returns a
-        :class:`~sb3_es.strategies.noise.NoiseTablePopulation`, which Ray ships as offsets).
+    :param noise_table: Draw each child's noise as a slice of this shared table: ``ask()`` then returns the children
+        as a :class:`~sb3_es.strategies.noise.NoiseTablePopulation` (offsets and scales, which Ray ships instead of
+        vectors).
     """
 
     def __init__(

@@ -19,8 +19,20 @@ from typing import Any
 import optuna
 from rl_zoo3.hyperparams_opt import convert_ars_params, sample_ars_params
 
-#: ``(trial, n_actions, n_envs, additional_args) -> algorithm keyword arguments``, as rl-zoo's samplers.
+#: ``(trial, n_actions, n_envs, additional_args) -> algorithm keyword arguments``, as rl-zoo's samplers: the Optuna
+#: trial, the action dimension (0 for ``Discrete`` actions), the number of env slots and rl-zoo's extra arguments.
+#: Only the REINFORCE sampler reads more than the trial (``n_actions``).
 Sampler = Callable[[optuna.Trial, int, int, dict], dict[str, Any]]
+
+
+def suggest_population_size_pow(trial: optuna.Trial) -> dict[str, int]:
+    """
+    :param trial: The Optuna trial.
+    :return: ``population_size_pow``, 3 to 7: a population of 8 to 128, a power of 2, so that it is even (mirrored
+        or symmetric sampling) and divides the usual ``n_envs``; :func:`convert_population_params` turns it into
+        ``population_size``.
+    """
+    return {"population_size_pow": trial.suggest_int("population_size_pow", 3, 7)}
 
 
 def convert_population_params(sampled: dict[str, Any]) -> dict[str, Any]:
@@ -38,58 +50,46 @@ def convert_population_params(sampled: dict[str, Any]) -> dict[str, Any]:
 
 def sample_openes_params(trial: optuna.Trial, n_actions: int, n_envs: int, additional_args: dict) -> dict[str, Any]:
     """
-    OpenES: noise ``sigma``, optimizer ``learning_rate`` and ``population_size`` (8 to 128, a power of 2, so it
-    is even for mirrored sampling and divides the usual ``n_envs``).
+    :data:`Sampler` of OpenES: noise ``sigma``, optimizer ``learning_rate`` and ``population_size`` (see
+    :func:`suggest_population_size_pow`).
 
-    :param trial: The Optuna trial.
-    :param n_actions: Action dimension (unused).
-    :param n_envs: Env slots (unused).
-    :param additional_args: rl-zoo's extra arguments (unused).
     :return: Keyword arguments for :class:`~sb3_es.OpenES`.
     """
     return convert_population_params(
         {
             "sigma": trial.suggest_float("sigma", 0.005, 0.5, log=True),
             "learning_rate": trial.suggest_float("learning_rate", 1e-3, 0.1, log=True),
-            "population_size_pow": trial.suggest_int("population_size_pow", 3, 7),
+            **suggest_population_size_pow(trial),
         }
     )
 
 
 def sample_cmaes_params(trial: optuna.Trial, n_actions: int, n_envs: int, additional_args: dict) -> dict[str, Any]:
     """
-    CMA-ES: initial step size ``sigma`` and ``population_size`` (8 to 128, a power of 2).
+    :data:`Sampler` of CMA-ES: initial step size ``sigma`` and ``population_size``.
 
-    :param trial: The Optuna trial.
-    :param n_actions: Action dimension (unused).
-    :param n_envs: Env slots (unused).
-    :param additional_args: rl-zoo's extra arguments (unused).
     :return: Keyword arguments for :class:`~sb3_es.CMAES`.
     """
     return convert_population_params(
         {
             "sigma": trial.suggest_float("sigma", 0.01, 1.0, log=True),
-            "population_size_pow": trial.suggest_int("population_size_pow", 3, 7),
+            **suggest_population_size_pow(trial),
         }
     )
 
 
 def sample_pgpe_params(trial: optuna.Trial, n_actions: int, n_envs: int, additional_args: dict) -> dict[str, Any]:
     """
-    PGPE with ClipUp: initial standard deviation ``stdev_init``, ClipUp's ``max_speed`` (the center learning rate
-    is half of it) and ``population_size`` (8 to 128, a power of 2: even, for symmetric sampling).
+    :data:`Sampler` of PGPE with ClipUp: initial standard deviation ``stdev_init``, ClipUp's ``max_speed`` (the
+    center learning rate is half of it) and ``population_size``.
 
-    :param trial: The Optuna trial.
-    :param n_actions: Action dimension (unused).
-    :param n_envs: Env slots (unused).
-    :param additional_args: rl-zoo's extra arguments (unused).
     :return: Keyword arguments for :class:`~sb3_es.PGPE`.
     """
     return convert_population_params(
         {
             "stdev_init": trial.suggest_float("stdev_init", 0.01, 0.5, log=True),
             "max_speed": trial.suggest_float("max_speed", 0.01, 0.5, log=True),
-            "population_size_pow": trial.suggest_int("population_size_pow", 3, 7),
+            **suggest_population_size_pow(trial),
         }
     )
 
@@ -109,19 +109,15 @@ def convert_simple_es_params(sampled: dict[str, Any]) -> dict[str, Any]:
 
 def sample_simple_es_params(trial: optuna.Trial, n_actions: int, n_envs: int, additional_args: dict) -> dict[str, Any]:
     """
-    SimpleES: ``sigma``, ``population_size`` (8 to 128, a power of 2) and ``n_elite`` as a fraction of it (1 child
-    at least: WinnerES).
+    :data:`Sampler` of SimpleES: ``sigma``, ``population_size`` and ``n_elite`` as a fraction of it (1 child at
+    least: WinnerES).
 
-    :param trial: The Optuna trial.
-    :param n_actions: Action dimension (unused).
-    :param n_envs: Env slots (unused).
-    :param additional_args: rl-zoo's extra arguments (unused).
     :return: Keyword arguments for :class:`~sb3_es.SimpleES`.
     """
     return convert_simple_es_params(
         {
             "sigma": trial.suggest_float("sigma", 0.01, 1.0, log=True),
-            "population_size_pow": trial.suggest_int("population_size_pow", 3, 7),
+            **suggest_population_size_pow(trial),
             "elite_fraction": trial.suggest_float("elite_fraction", 0.0, 0.5),
         }
     )
@@ -142,14 +138,10 @@ def convert_reinforce_params(sampled: dict[str, Any]) -> dict[str, Any]:
 
 def sample_reinforce_params(trial: optuna.Trial, n_actions: int, n_envs: int, additional_args: dict) -> dict[str, Any]:
     """
-    REINFORCE: Adam ``learning_rate`` and, for ``Box`` actions, the number of levels per dimension ``n_bins``
-    (set as ``policy_kwargs=dict(n_bins=...)``, which replaces the file's ``policy_kwargs``, as rl-zoo's samplers
-    replace ``net_arch``).
+    :data:`Sampler` of REINFORCE: Adam ``learning_rate`` and, for ``Box`` actions (``n_actions > 0``), the number of levels per
+    dimension ``n_bins`` (set as ``policy_kwargs=dict(n_bins=...)``, which replaces the file's ``policy_kwargs``, as
+    rl-zoo's samplers replace ``net_arch``).
 
-    :param trial: The Optuna trial.
-    :param n_actions: Action dimension (0 for ``Discrete`` actions: no ``n_bins``).
-    :param n_envs: Env slots (unused).
-    :param additional_args: rl-zoo's extra arguments (unused).
     :return: Keyword arguments for :class:`~sb3_es.REINFORCE`.
     """
     sampled: dict[str, Any] = {"learning_rate": trial.suggest_float("learning_rate", 1e-4, 3e-2, log=True)}

@@ -1,0 +1,182 @@
+"""The model of a population method: a flat policy whose parameters a strategy searches, and the strategy's
+hyperparameters (built once, scheduled every generation, changed by ``load()``, upgraded from old saves)."""
+
+from __future__ import annotations
+
+import io
+import pathlib
+from abc import abstractmethod
+from typing import Any, ClassVar
+
+import numpy as np
+import torch as th
+from stable_baselines3.common.type_aliases import Schedule
+
+from sb3_es.common.base_class import ESBaseAlgorithm
+from sb3_es.common.checks import check_positive, check_scheduled_value
+from sb3_es.common.policies import FlatPolicy
+from sb3_es.strategies import Strategy
+from sb3_es.strategies.base import Population
+from sb3_es.strategies.noise import SharedNoiseTable
+
+
+def initial_value(value: float | Schedule) -> float:
+    """
+    :param value: A float or a schedule ``progress_remaining -> value``.
+    :return: The value at the start of training (a strategy is built with it; a schedule then takes over).
+    """
+    return float(value(1.0) if callable(value) else value)
+
+
+def check_noise_table_size(size: int | None) -> int | None:
+    """
+    :param size: ``noise_table_size`` of an algorithm: a positive number of float32 values, or ``None``.
+    :return: ``size``, once checked.
+    """
+    if size is not None and int(size) < 1:
+        raise ValueError(f"noise_table_size={size}: use a positive size or None.")
+    return size
+
+
+def make_noise_table(size: int | None, seed: np.random.SeedSequence) -> SharedNoiseTable | None:
+    """
+    Build the shared noise table of a strategy, if one was asked for.
+
+    :param size: Number of float32 values, or ``None`` for no table (directions drawn fresh).
+    :param seed: Seed sequence of the strategy (the table's seed is derived from it).
+    :return: The table, or ``None``.
+    """
+    if size is None:
+        return None
+    return SharedNoiseTable(size, seed=int(seed.generate_state(1)[0]))
+
+
+class StrategyAlgorithm(ESBaseAlgorithm):
+    """
+    What a population method keeps between generations, and saves: its :class:`~sb3_es.common.policies.FlatPolicy`
+    (whose parameters are the strategy's center), its strategy (built by :meth:`_make_strategy`) and the random
+    generator of the evaluation seeds. The training loop that uses them is
+    :class:`~sb3_es.common.population_algorithm.PopulationAlgorithm`, whose ``__init__`` sets the attributes
+    read here (``zero_policy``, ``seed``, ...).
+    """
+
+    policy: FlatPolicy
+    strategy: Strategy | None
+    _env_rng: np.random.Generator | None
+    zero_policy: bool
+    #: Hyperparameters that may be SB3 schedules: each names an attribute of the algorithm (a float or a
+    #: schedule ``progress_remaining -> value``) and the strategy attribute of the same name. The strategy is
+    #: built with the starting value; a schedule is then evaluated, checked and written into the strategy at
+    #: the start of every generation (the one place where anything outside a strategy changes it).
+    scheduled_hyperparameters: ClassVar[tuple[str, ...]] = ()
+    #: Hyperparameters the strategy keeps under the same name and that ``load()`` may change: the strategy checks
+    #: the new values (``Strategy.check_settings``) and uses them from the next generation on.
+    strategy_hyperparameters: ClassVar[tuple[str, ...]] = ()
+
+    def _setup_model(self) -> None:
+        if self.learning_rate is not None:
+            self._setup_lr_schedule()  # SB3's lr_schedule attribute, as in SB3; _ask() applies the schedule
+        self.set_random_seed(self.seed)
+        policy = self.policy_class(self.observation_space, self.action_space, **self.policy_kwargs)
+        if not isinstance(policy, FlatPolicy):
+            raise TypeError(f"{self._algorithm_name} needs a FlatPolicy subclass, got {type(policy).__name__}.")
+        self.policy = policy.to(self.device)
+        if self.strategy is None:  # a loaded model brings its strategy (and its random state)
+            strategy_seed, env_seed = np.random.SeedSequence(self.seed).spawn(2)
+            center = self.policy.parameters_to_vector()
+            if self.zero_policy:
+                center[self.policy.output_layer_slice()] = 0.0
+            self.strategy = self._make_strategy(center, strategy_seed)
+            self._env_rng = np.random.default_rng(env_seed)
+        elif self.strategy.restored_legacy_state:
+            self._upgrade_legacy_strategy()
+            self.strategy.state_version = self.strategy.STATE_VERSION
+        self.policy.load_from_vector(self.strategy.center)
+
+    @abstractmethod
+    def _make_strategy(self, center: np.ndarray, seed: np.random.SeedSequence) -> Strategy:
+        """
+        Build the strategy.
+
+        :param center: Initial parameters.
+        :param seed: Seed for the strategy's random generator.
+        :return: The strategy.
+        """
+
+    def _upgrade_legacy_strategy(self) -> None:
+        """
+        A strategy saved before version 2 had hyperparameters that the algorithm overwrote every generation:
+        give it the algorithm's values (a schedule is applied at the next generation anyway).
+        """
+        for name in self.scheduled_hyperparameters:
+            value = getattr(self, name)
+            if not callable(value):
+                setattr(self.strategy, name, float(value))
+
+    @classmethod
+    def _applicable_on_load(cls) -> set[str]:
+        return super()._applicable_on_load() | set(cls.scheduled_hyperparameters) | set(cls.strategy_hyperparameters)
+
+    def _apply_hyperparameters(self, changed: dict[str, Any]) -> None:
+        """
+        Hand the loaded strategy the hyperparameters that ``load()`` changed: a number for a scheduled one (a
+        schedule is written into it at every generation anyway) and the strategy-held ones; the strategy checks
+        them. The others (:attr:`_live_hyperparameters`) are read from the model at every generation.
+
+        :param changed: ``name -> new value``.
+        """
+        assert self.strategy is not None
+        for name, value in changed.items():
+            if name in self.scheduled_hyperparameters and not callable(value):
+                check_positive(name, value)
+                setattr(self.strategy, name, float(value))
+            elif name in self.strategy_hyperparameters:
+                setattr(self.strategy, name, value)
+        self.strategy.check_settings()
+
+    def _ask(self) -> Population:
+        """
+        Write this generation's value of every scheduled hyperparameter into the strategy, then ask it.
+
+        :return: The candidates ``(population_size, num_params)``.
+        """
+        assert self.strategy is not None
+        progress = self._current_progress_remaining
+        for name in self.scheduled_hyperparameters:
+            schedule = getattr(self, name)
+            if callable(schedule):
+                value = float(schedule(progress))
+                # A step size may reach 0 (no update); a noise scale (sigma, delta_std) must stay positive.
+                check_scheduled_value(name, value, progress, allow_zero=name == "learning_rate")
+                setattr(self.strategy, name, value)
+        return self.strategy.ask()
+
+    @property
+    def best_params(self) -> np.ndarray:
+        """
+        :return: Parameters of the best candidate seen (with ``forget_best``, of the latest generation); its
+            fitness is ``strategy.best_fitness``. Load them with ``policy.load_from_vector``.
+        """
+        assert self.strategy is not None
+        return self.strategy.best_params
+
+    def set_parameters(
+        self,
+        load_path_or_dict: str | dict[str, th.Tensor],
+        exact_match: bool = True,
+        device: th.device | str = "auto",
+    ) -> None:
+        super().set_parameters(load_path_or_dict, exact_match=exact_match, device=device)
+        # Keep the strategy's center in step with weights written into the policy from outside.
+        assert self.strategy is not None
+        vector = self.policy.parameters_to_vector()
+        if not np.array_equal(vector.astype(np.float32), self.strategy.center.astype(np.float32)):
+            self.strategy.set_center(vector)
+
+    @classmethod
+    def _check_save_data(cls, path: str | pathlib.Path | io.BufferedIOBase, data: dict[str, Any]) -> None:
+        if not isinstance(data.get("strategy"), Strategy):
+            raise ValueError(
+                f"Cannot load {path!r}: the saved strategy state could not be read (the file is damaged or was "
+                "written by an incompatible version), so training could not continue where it stopped."
+            )
