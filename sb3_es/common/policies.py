@@ -28,15 +28,8 @@ from stable_baselines3.common.torch_layers import create_mlp
 from stable_baselines3.common.type_aliases import PyTorchObs
 from torch import nn
 
-from sb3_es.evaluation.network import (
-    OBS_NORM_EPS,
-    Layer,
-    LayerNorm,
-    Linear,
-    NetworkSpec,
-    ParamSlice,
-    activation_for,
-)
+from sb3_es.common.network_layout import network_layers
+from sb3_es.evaluation.network import OBS_NORM_EPS, NetworkSpec
 from sb3_es.evaluation.observations import flat_obs_dim
 
 __all__ = ["OBS_NORM_EPS", "FlatPolicy", "LinearPolicy", "MlpPolicy", "flat_obs_dim"]
@@ -94,6 +87,8 @@ class FlatPolicy(BasePolicy):
                 "net_arch=[64, 64]."
             )
         super().__init__(observation_space, action_space, squash_output=is_box and squash_output)
+        self.obs_dim = obs_dim
+        self.action_dim = action_dim
         self.net_arch = [64, 64] if net_arch is None else list(net_arch)
         if any(int(n) <= 0 for n in self.net_arch):
             raise ValueError(f"net_arch={self.net_arch}: every hidden layer size must be a positive integer.")
@@ -101,8 +96,6 @@ class FlatPolicy(BasePolicy):
         self.with_bias = with_bias
         self.layer_norm = layer_norm
         self.normalize_observations = normalize_observations
-        self.obs_dim = obs_dim
-        self.action_dim = action_dim
         layers = create_mlp(
             obs_dim,
             action_dim,
@@ -117,28 +110,7 @@ class FlatPolicy(BasePolicy):
         self.register_buffer("obs_mean", th.zeros(obs_dim, dtype=th.float64))
         self.register_buffer("obs_var", th.ones(obs_dim, dtype=th.float64))
         self.register_buffer("obs_count", th.tensor(1e-4, dtype=th.float64))
-        self._build_layout()
-
-    def _build_layout(self) -> None:
-        """Describe each module of ``action_net`` as a layer of the spec (offsets in the order of ``parameters()``)."""
-        layers: list[Layer] = []
-        offset = 0
-        for module in self.action_net:
-            slices: list[ParamSlice] = []
-            for param in module.parameters(recurse=False):
-                size = param.numel()
-                slices.append((offset, offset + size, tuple(param.shape)))
-                offset += size
-            if isinstance(module, nn.Linear):
-                layers.append(Linear(slices[0], slices[1] if len(slices) > 1 else None))
-            elif isinstance(module, nn.LayerNorm):
-                layers.append(LayerNorm(slices[0], slices[1], float(module.eps)))
-            elif slices:
-                raise ValueError(f"Module {module} has parameters but no batched forward pass.")
-            else:
-                layers.append(activation_for(module))
-        self._layers = tuple(layers)
-        self.num_params = offset
+        self._layers, self.num_params = network_layers(self.action_net)
 
     def _get_constructor_parameters(self) -> dict[str, Any]:
         # BasePolicy's version adds normalize_images, which these policies do not take.

@@ -17,23 +17,12 @@ from sb3_es.common.base_class import ESBaseAlgorithm
 from sb3_es.common.checks import check_positive
 from sb3_es.common.evaluator_choice import check_evaluator, resolve_evaluator
 from sb3_es.common.policies import FlatPolicy, LinearPolicy, MlpPolicy
-from sb3_es.common.strategy_algorithm import (
-    StrategyAlgorithm,
-    check_noise_table_size,
-    initial_value,
-    make_noise_table,
-)
+from sb3_es.common.strategy_algorithm import StrategyAlgorithm, check_noise_table_size, initial_value, make_noise_table
 from sb3_es.evaluation import PopulationEvaluator, PopulationResult, RewardShaping
 
 SelfPopulationAlgorithm = TypeVar("SelfPopulationAlgorithm", bound="PopulationAlgorithm")
 
-__all__ = [
-    "PopulationAlgorithm",
-    "check_noise_table_size",
-    "check_positive",
-    "initial_value",
-    "make_noise_table",
-]
+__all__ = ["PopulationAlgorithm", "check_noise_table_size", "check_positive", "initial_value", "make_noise_table"]
 
 
 class PopulationAlgorithm(StrategyAlgorithm):

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass
 from typing import Any, ClassVar, TypeVar
 
 import numpy as np
@@ -19,6 +18,7 @@ from sb3_es.common.arguments import base_arguments
 from sb3_es.common.base_class import ESBaseAlgorithm
 from sb3_es.common.checks import check_positive, check_scheduled_value
 from sb3_es.evaluation.time_limit import end_capped_episodes
+from sb3_es.reinforce.episodes import EpisodeBatch, EpisodeCollector, check_rewards
 from sb3_es.reinforce.legacy import upgrade_legacy_optimizer_state
 from sb3_es.reinforce.policies import DiscretizedPolicy, MlpPolicy, MultiInputPolicy, check_action_space
 
@@ -27,45 +27,7 @@ SelfREINFORCE = TypeVar("SelfREINFORCE", bound="REINFORCE")
 #: Added to the standard deviation when normalizing returns.
 RETURN_NORM_EPS = 1e-8
 
-
-@dataclass
-class EpisodeBatch:
-    """
-    The transitions of the complete episodes collected for one update, flattened over time and env slots.
-
-    :param observations: Observations ``(n_steps, ...)`` (a dict of arrays for ``Dict`` spaces).
-    :param indices: Action indices taken (what the policy's distribution sampled).
-    :param returns: Discounted returns-to-go ``G_t`` (not normalized).
-    :param episode_returns: Undiscounted return of each episode in the batch.
-    """
-
-    observations: np.ndarray | dict[str, np.ndarray]
-    indices: np.ndarray
-    returns: np.ndarray
-    episode_returns: np.ndarray
-
-
-def check_rewards(rewards: np.ndarray, dones: np.ndarray, keep: np.ndarray, update: int) -> None:
-    """
-    Refuse a batch whose episodes have a non-finite reward (it would make every weight NaN).
-
-    :param rewards: Rewards ``(n_steps, n_envs)`` of the vec steps of the update.
-    :param dones: Episode ends, same shape.
-    :param keep: Which steps belong to the episodes used by the update, same shape.
-    :param update: Number of the update (1 for the first of the model), for the message.
-    """
-    bad = keep & ~np.isfinite(rewards)
-    if not bad.any():
-        return
-    t, slot = (int(k) for k in np.argwhere(bad)[0])
-    ends = np.flatnonzero(dones[:t, slot])
-    episode = len(ends) + 1
-    step = t - (int(ends[-1]) if len(ends) else -1)
-    raise ValueError(
-        f"Non-finite reward {rewards[t, slot]} at step {step} of episode {episode} (env slot {slot}) in update "
-        f"{update}, {int(bad.sum())} such reward(s) in the episodes of this update. The update was not applied: the "
-        "parameters are those of the last update. Check the environment's rewards (NaN/inf)."
-    )
+__all__ = ["RETURN_NORM_EPS", "REINFORCE", "EpisodeBatch", "check_rewards"]
 
 
 class REINFORCE(ESBaseAlgorithm):
@@ -78,14 +40,13 @@ class REINFORCE(ESBaseAlgorithm):
     batch. ``Box`` actions are discretized by :class:`~sb3_es.reinforce.policies.DiscretizedPolicy`
     into ``n_bins`` levels per dimension (joint or factorized categorical, see ``policy_kwargs``).
 
-    Episode collection: the ``n_episodes`` episodes are split in advance between the VecEnv's slots
-    (slot ``i`` contributes ``n_episodes // n_envs`` episodes, plus one if ``i < n_episodes % n_envs``)
-    and every slot runs its episodes in parallel. A slot that has finished its share keeps stepping (a
-    VecEnv steps all slots together) and the episodes it plays then are *discarded*, as is any episode
-    still running when the last needed one ends: fixing the episodes in advance avoids the bias towards
-    short episodes of "the first ``n_episodes`` to finish". Every env step counts in ``num_timesteps``
-    (``+= n_envs`` per vec step), discarded ones included, and their Monitor statistics still go to
-    ``rollout/ep_rew_mean``. Use ``n_episodes`` a multiple of ``n_envs`` to waste few steps.
+    Episode collection (:class:`~sb3_es.reinforce.episodes.EpisodeCollector`): the ``n_episodes`` episodes are
+    split in advance between the VecEnv's slots, which play them in parallel; a slot done with its share keeps
+    stepping (a VecEnv steps all slots together) and the episodes it plays then are *discarded*, as is any episode
+    still running when the last needed one ends: fixing the episodes in advance avoids the bias towards short
+    episodes of "the first ``n_episodes`` to finish". Every env step counts in ``num_timesteps``, discarded ones
+    included, and their Monitor statistics still go to ``rollout/ep_rew_mean``. Use ``n_episodes`` a multiple of
+    ``n_envs`` to waste few steps.
 
     Each update starts with ``env.seed(s)`` and ``env.reset()``, and samples its actions from a torch
     generator seeded with ``s'``, where ``s, s'`` come from a random generator stored in the model
@@ -282,7 +243,7 @@ class REINFORCE(ESBaseAlgorithm):
         assert self._rng is not None
         n_envs = env.num_envs
         max_steps = self.episode_step_limit()
-        quotas = np.array([self.n_episodes // n_envs + (i < self.n_episodes % n_envs) for i in range(n_envs)])
+        episodes = EpisodeCollector(self.n_episodes, n_envs)
         env_seed, sample_seed = (int(s) for s in self._rng.integers(2**31 - 1 - n_envs, size=2))
         generator = th.Generator(device=self.device)
         generator.manual_seed(sample_seed)
@@ -290,73 +251,24 @@ class REINFORCE(ESBaseAlgorithm):
         obs = env.reset()
         self.policy.set_training_mode(False)
         callback.on_rollout_start()
-
-        finished = np.zeros(n_envs, dtype=np.int64)
-        ep_return = np.zeros(n_envs)
-        ep_length = np.zeros(n_envs, dtype=np.int64)
-        obs_buf: list[Any] = []
-        idx_buf: list[np.ndarray] = []
-        rew_buf: list[np.ndarray] = []
-        done_buf: list[np.ndarray] = []
-        keep_buf: list[np.ndarray] = []
-        kept_returns: list[float] = []
-        while np.any(finished < quotas):
+        while not episodes.complete:
             with th.no_grad():
                 indices = self.policy(obs_as_tensor(obs, self.device), generator=generator)  # type: ignore[arg-type]
                 actions = self.policy.indices_to_actions(indices).cpu().numpy()
             actions = actions.reshape((n_envs, *self.action_space.shape))  # type: ignore[misc]
             new_obs, rewards, dones, infos = env.step(actions)
-            end_capped_episodes(env, max_steps, ep_length + 1, new_obs, dones, infos)  # type: ignore[arg-type]
+            end_capped_episodes(env, max_steps, episodes.ep_length + 1, new_obs, dones, infos)  # type: ignore[arg-type]
             self.num_timesteps += n_envs
             callback.update_locals(locals())
             if not callback.on_step():
                 return None
             self._update_info_buffer(infos, dones)
-
-            keep = finished < quotas
-            obs_buf.append(obs)
-            idx_buf.append(indices.cpu().numpy())
-            rew_buf.append(np.asarray(rewards, dtype=np.float64))
-            done_buf.append(np.asarray(dones, dtype=bool))
-            keep_buf.append(keep)
-            ep_return += rewards
-            ep_length += 1
-            fallback_infos = []
-            for i in np.flatnonzero(dones):
-                if "episode" not in infos[i]:  # no Monitor: report what was measured here
-                    fallback_infos.append({"episode": {"r": float(ep_return[i]), "l": int(ep_length[i])}})
-                if keep[i]:
-                    kept_returns.append(float(ep_return[i]))
-                ep_return[i] = 0.0
-                ep_length[i] = 0
-            if fallback_infos:
-                self._update_info_buffer(fallback_infos)
-            finished += dones
+            unmonitored = episodes.add(obs, indices.cpu().numpy(), rewards, dones, infos)
+            if unmonitored:  # no Monitor: report what was measured here
+                self._update_info_buffer(unmonitored)
             obs = new_obs
-
         callback.on_rollout_end()
-
-        rewards_tn = np.stack(rew_buf)
-        dones_tn = np.stack(done_buf)
-        keep_tn = np.stack(keep_buf)
-        check_rewards(rewards_tn, dones_tn, keep_tn, self._n_updates + 1)
-        returns_tn = np.zeros_like(rewards_tn)
-        running = np.zeros(n_envs)
-        for t in reversed(range(len(rew_buf))):
-            running = rewards_tn[t] + self.gamma * running * (1.0 - dones_tn[t])
-            returns_tn[t] = running
-        if isinstance(obs_buf[0], dict):
-            observations: np.ndarray | dict[str, np.ndarray] = {
-                key: np.stack([o[key] for o in obs_buf])[keep_tn] for key in obs_buf[0]
-            }
-        else:
-            observations = np.stack(obs_buf)[keep_tn]
-        return EpisodeBatch(
-            observations=observations,
-            indices=np.stack(idx_buf)[keep_tn],
-            returns=returns_tn[keep_tn],
-            episode_returns=np.array(kept_returns),
-        )
+        return episodes.batch(self.gamma, self._n_updates + 1)
 
     def train(self, batch: EpisodeBatch) -> None:
         """

@@ -138,9 +138,9 @@ def convert_reinforce_params(sampled: dict[str, Any]) -> dict[str, Any]:
 
 def sample_reinforce_params(trial: optuna.Trial, n_actions: int, n_envs: int, additional_args: dict) -> dict[str, Any]:
     """
-    :data:`Sampler` of REINFORCE: Adam ``learning_rate`` and, for ``Box`` actions (``n_actions > 0``), the number of levels per
-    dimension ``n_bins`` (set as ``policy_kwargs=dict(n_bins=...)``, which replaces the file's ``policy_kwargs``, as
-    rl-zoo's samplers replace ``net_arch``).
+    :data:`Sampler` of REINFORCE: Adam ``learning_rate`` and, for ``Box`` actions (``n_actions > 0``), the number
+    of levels per dimension ``n_bins`` (set as ``policy_kwargs=dict(n_bins=...)``, which replaces the file's
+    ``policy_kwargs``, as rl-zoo's samplers replace ``net_arch``).
 
     :return: Keyword arguments for :class:`~sb3_es.REINFORCE`.
     """
