@@ -9,6 +9,7 @@ import re
 import warnings
 import zipfile
 from pathlib import Path
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -18,38 +19,80 @@ from algorithms import ALGORITHMS, POPULATION_ALGORITHMS, Algo
 from envs import MultiDiscreteActionEnv
 from stable_baselines3.common.policies import BasePolicy
 
-from sb3_es import ARS, CMAES, REINFORCE, OpenES
+from sb3_es import ARS, CMAES, PGPE, REINFORCE, OpenES, SimpleES
 
 
 # ---------------------------------------------------------------------------- hyperparameters
-@pytest.mark.parametrize(("n_delta", "n_top"), [(2, 3), (4, 5), (4, 0), (4, -1), (4, 1.5)])
-def test_bad_n_top(n_delta: int, n_top: float) -> None:
-    with pytest.raises(ValueError, match="n_top"):
-        ARS("LinearPolicy", "Pendulum-v1", n_delta=n_delta, n_top=n_top)
+def each(cls: type, name: str, values: list[Any], match: str | None = None, **kwargs: Any) -> list[Any]:
+    """One entry per bad value of one hyperparameter (with ``kwargs``); the error must name it, or match ``match``."""
+    return [
+        pytest.param(cls, {**kwargs, name: value}, match or name, id="-".join([cls.__name__, *kwargs, name, str(i)]))
+        for i, value in enumerate(values)
+    ]
 
 
-@pytest.mark.parametrize("n_delta", [0, -1, 2.5])
-def test_bad_n_delta(n_delta: float) -> None:
-    with pytest.raises(ValueError, match="n_delta"):
-        ARS("LinearPolicy", "Pendulum-v1", n_delta=n_delta)
+NAN, INF = float("nan"), float("inf")
+#: ``(algorithm, constructor arguments, what the error message must match)``: every algorithm's bad values.
+BAD_HYPERPARAMETERS = [
+    *each(ARS, "n_delta", [0, -1, 2.5]),
+    *[
+        pytest.param(ARS, dict(n_delta=n_delta, n_top=n_top), "n_top", id=f"ARS-n_top-{i}")
+        for i, (n_delta, n_top) in enumerate([(2, 3), (4, 5), (4, 0), (4, -1), (4, 1.5)])
+    ],
+    *each(ARS, "delta_std", [0.0, -0.05, NAN, INF, lambda progress: -progress]),
+    *each(ARS, "learning_rate", [0.0, -0.02, NAN, INF, lambda progress: 0.0]),
+    *each(ARS, "n_eval_episodes", [0, -2, 1.5]),
+    *each(OpenES, "population_size", [1, 0, -2], antithetic=True),
+    *each(OpenES, "population_size", [1, 0, -2], antithetic=False),
+    *each(OpenES, "sigma", [0.0, -0.1, NAN, lambda progress: 0.0]),
+    *each(OpenES, "sigma_decay", [0.0, -0.5, 1.01, 2.0]),
+    *each(OpenES, "learning_rate_decay", [0.0, -0.5, 1.01, 2.0]),
+    *each(OpenES, "sigma_limit", [-1, NAN], r"sigma_limit=(-1|nan): it must be a finite number >= 0"),
+    *each(OpenES, "learning_rate_limit", [-1], r"learning_rate_limit=-1: it must be a finite number >= 0"),
+    *each(OpenES, "momentum", [NAN], r"momentum=nan: the SGD momentum must be in \[0, 1\)"),
+    *each(OpenES, "momentum", [NAN, 1.5], r"momentum=(nan|1.5)", optimizer="sgd"),
+    *each(OpenES, "weight_decay", [NAN, -0.1]),
+    *each(OpenES, "fitness_shaping", ["ranks"]),
+    *each(OpenES, "optimizer", ["rmsprop"]),
+    *each(CMAES, "population_size", [1, 0, -3]),
+    *each(CMAES, "sigma", [0.0, -0.1, NAN, INF]),
+    *each(CMAES, "max_restarts", [-1, 1.5, NAN], r"max_restarts=(-1|1.5|nan): it must be a non-negative integer"),
+    *each(CMAES, "diagonal", ["yes"]),
+    *each(CMAES, "restarts", ["lpop"]),
+    *each(PGPE, "population_size", [3, 7, 0]),
+    *each(PGPE, "stdev_init", [0.0]),
+    *each(PGPE, "stdev_max_change", [1.0, 0.0]),
+    *each(PGPE, "stdev_learning_rate", [-0.1]),
+    *each(PGPE, "max_speed", [0.0]),
+    *each(PGPE, "momentum", [1.0]),
+    *each(PGPE, "optimizer", ["adam"], "center_learning_rate"),
+    *each(PGPE, "max_speed", [0.2], optimizer="adam", center_learning_rate=0.01),
+    *each(PGPE, "optimizer", ["rmsprop"], center_learning_rate=0.01),
+    *each(PGPE, "fitness_shaping", ["rank"]),
+    *each(SimpleES, "n_elite", [0, 17]),
+    *each(SimpleES, "population_size", [1]),
+    *each(SimpleES, "sigma", [0.0]),
+    *each(SimpleES, "weights", ["fitness"]),
+    *each(REINFORCE, "n_episodes", [0, -3], r"n_episodes=(0|-3)"),
+    *each(REINFORCE, "learning_rate", [0.0, -1e-3, lambda _: -1.0], r"learning_rate=(0.0|-0.001|-1.0)"),
+    *each(REINFORCE, "gamma", [1.5, -0.1], r"gamma=(1.5|-0.1).*\[0, 1\]"),
+    *each(REINFORCE, "max_grad_norm", [0.0], "max_grad_norm=0.0"),
+    *each(REINFORCE, "policy_kwargs", [dict(n_bins=1)], "n_bins=1"),
+    *each(REINFORCE, "policy_kwargs", [dict(use_baseline=True)], "use_baseline"),
+    *each(
+        REINFORCE,
+        "policy_kwargs",
+        [dict(net_arch=dict(pi=[8], vf=[8]))],
+        r"value_net_arch for the baseline \(not dict\(pi=",
+    ),
+]
 
 
-@pytest.mark.parametrize("delta_std", [0.0, -0.05, float("nan"), float("inf"), lambda progress: -progress])
-def test_bad_delta_std(delta_std) -> None:
-    with pytest.raises(ValueError, match="delta_std"):
-        ARS("LinearPolicy", "Pendulum-v1", delta_std=delta_std)
-
-
-@pytest.mark.parametrize("learning_rate", [0.0, -0.02, float("nan"), float("inf"), lambda progress: 0.0])
-def test_bad_learning_rate(learning_rate) -> None:
-    with pytest.raises(ValueError, match="learning_rate"):
-        ARS("LinearPolicy", "Pendulum-v1", learning_rate=learning_rate)
-
-
-@pytest.mark.parametrize("n_eval_episodes", [0, -2, 1.5])
-def test_bad_n_eval_episodes(n_eval_episodes: float) -> None:
-    with pytest.raises(ValueError, match="n_eval_episodes"):
-        ARS("LinearPolicy", "Pendulum-v1", n_eval_episodes=n_eval_episodes)
+@pytest.mark.parametrize(("cls", "kwargs", "match"), BAD_HYPERPARAMETERS)
+def test_bad_hyperparameters_are_named(cls: type, kwargs: dict[str, Any], match: str) -> None:
+    policy = "MlpPolicy" if cls is REINFORCE else "LinearPolicy"
+    with pytest.raises(ValueError, match=match):
+        cls(policy, "Pendulum-v1", **kwargs)
 
 
 def test_delta_std_schedule_reaching_zero_during_training() -> None:
@@ -126,29 +169,6 @@ def test_learning_rate_schedule_ending_at_zero_is_accepted() -> None:
 
 
 # ---------------------------------------------------------------------------- algorithm hyperparameters
-@pytest.mark.parametrize(
-    ("kwargs", "match"),
-    [
-        (dict(sigma_limit=-1), r"sigma_limit=-1: it must be a finite number >= 0"),
-        (dict(learning_rate_limit=-1), r"learning_rate_limit=-1: it must be a finite number >= 0"),
-        (dict(sigma_limit=float("nan")), r"sigma_limit=nan"),
-        (dict(momentum=float("nan")), r"momentum=nan: the SGD momentum must be in \[0, 1\)"),
-        (dict(momentum=float("nan"), optimizer="sgd"), r"momentum=nan"),
-        (dict(momentum=1.5, optimizer="sgd"), r"momentum=1.5"),
-        (dict(weight_decay=float("nan")), r"weight_decay=nan"),
-    ],
-)
-def test_openes_bad_limits_and_momentum(kwargs: dict, match: str) -> None:
-    with pytest.raises(ValueError, match=match):
-        OpenES("LinearPolicy", "Pendulum-v1", **kwargs)
-
-
-@pytest.mark.parametrize("max_restarts", [-1, 1.5, float("nan")])
-def test_cmaes_bad_max_restarts(max_restarts: float) -> None:
-    with pytest.raises(ValueError, match=rf"max_restarts={max_restarts}: it must be a non-negative integer"):
-        CMAES("LinearPolicy", "Pendulum-v1", max_restarts=max_restarts)
-
-
 def test_cmaes_population_too_small_for_two_point_adaptation() -> None:
     """From 300 parameters pycma's TPA takes 2 candidates per generation and mirroring one more."""
     match = r"population_size=2 is too small for CMA-ES on 4481 parameters.*TPA.*population_size >= 3"

@@ -152,30 +152,3 @@ def test_fitness_reward_shaping_reaches_the_evaluator() -> None:
     model.learn(PENDULUM_GENERATION)
     # Every step's reward clipped to [-1, 1] plus 0.5: each fitness lies in [-100, 300] over 200 steps.
     assert -100 <= model.strategy.best_fitness <= 300
-
-
-# ---------------------------------------------------------------------------- errors
-@pytest.mark.parametrize("population_size", [3, 7, 0])
-def test_population_must_be_even(population_size: int) -> None:
-    with pytest.raises(ValueError, match="population_size"):
-        PGPE("LinearPolicy", "Pendulum-v1", population_size=population_size)
-
-
-@pytest.mark.parametrize(
-    ("kwargs", "match"),
-    [
-        (dict(stdev_init=0.0), "stdev_init"),
-        (dict(stdev_max_change=1.0), "stdev_max_change"),
-        (dict(stdev_max_change=0.0), "stdev_max_change"),
-        (dict(stdev_learning_rate=-0.1), "stdev_learning_rate"),
-        (dict(max_speed=0.0), "max_speed"),
-        (dict(momentum=1.0), "momentum"),
-        (dict(optimizer="adam"), "center_learning_rate"),
-        (dict(optimizer="adam", center_learning_rate=0.01, max_speed=0.2), "max_speed"),
-        (dict(optimizer="rmsprop", center_learning_rate=0.01), "optimizer"),
-        (dict(fitness_shaping="rank"), "fitness_shaping"),
-    ],
-)
-def test_bad_hyperparameters(kwargs: dict[str, Any], match: str) -> None:
-    with pytest.raises(ValueError, match=match):
-        PGPE("LinearPolicy", "Pendulum-v1", **kwargs)

@@ -184,27 +184,6 @@ def test_dict_observation_from_dm_control() -> None:
     env.close()
 
 
-@pytest.mark.parametrize(
-    ("kwargs", "match"),
-    [
-        (dict(policy_kwargs=dict(n_bins=1)), "n_bins=1"),
-        (dict(n_episodes=0), "n_episodes=0"),
-        (dict(n_episodes=-3), "n_episodes=-3"),
-        (dict(learning_rate=0.0), "learning_rate=0.0"),
-        (dict(learning_rate=-1e-3), "learning_rate=-0.001"),
-        (dict(learning_rate=lambda _: -1.0), "learning_rate=-1.0"),
-        (dict(gamma=1.5), r"gamma=1.5.*\[0, 1\]"),
-        (dict(gamma=-0.1), r"gamma=-0.1.*\[0, 1\]"),
-        (dict(max_grad_norm=0.0), "max_grad_norm=0.0"),
-        (dict(policy_kwargs=dict(use_baseline=True)), "use_baseline"),
-        (dict(policy_kwargs=dict(net_arch=dict(pi=[8], vf=[8]))), r"value_net_arch for the baseline \(not dict\(pi="),
-    ],
-)
-def test_invalid_hyperparameters(kwargs: dict[str, Any], match: str) -> None:
-    with pytest.raises(ValueError, match=match):
-        REINFORCE("MlpPolicy", BoxActionEnv(), **kwargs)
-
-
 class _MultiDiscreteEnv(BoxActionEnv):
     def __init__(self, action_space: spaces.Space) -> None:
         super().__init__()

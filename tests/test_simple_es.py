@@ -94,18 +94,3 @@ def test_sigma_schedule_and_save_load(tmp_path: Path) -> None:
     loaded = SimpleES.load(tmp_path / "simple.zip")
     assert (loaded.n_elite, loaded.weights) == (2, "log")
     np.testing.assert_array_equal(loaded.strategy.ask(), model.strategy.ask())
-
-
-@pytest.mark.parametrize(
-    ("kwargs", "match"),
-    [
-        (dict(n_elite=0), "n_elite"),
-        (dict(n_elite=17), "n_elite"),
-        (dict(population_size=1), "population_size"),
-        (dict(sigma=0.0), "sigma"),
-        (dict(weights="fitness"), "weights"),
-    ],
-)
-def test_bad_hyperparameters(kwargs: dict, match: str) -> None:
-    with pytest.raises(ValueError, match=match):
-        SimpleES("LinearPolicy", "Pendulum-v1", **kwargs)

@@ -31,6 +31,7 @@ from stable_baselines3.common.torch_layers import BaseFeaturesExtractor, Flatten
 from stable_baselines3.common.type_aliases import PyTorchObs, Schedule
 from torch import nn
 
+from sb3_es.common.arguments import base_arguments
 from sb3_es.evaluation.network import flat_obs_dim
 from sb3_es.reinforce.legacy import upgrade_legacy_state_dict
 
@@ -141,19 +142,10 @@ class DiscretizedPolicy(ActorCriticPolicy):
             dict_obs = isinstance(observation_space, spaces.Dict)
             features_extractor_class = DictFlattenExtractor if dict_obs else FlattenExtractor
         value_arch = (self.value_net_arch or self.policy_net_arch) if self.use_baseline else []
-        super().__init__(
-            observation_space,
-            action_space,
-            lr_schedule,
-            net_arch=dict(pi=self.policy_net_arch, vf=value_arch),
-            activation_fn=activation_fn,
-            ortho_init=ortho_init,
-            features_extractor_class=features_extractor_class,
-            features_extractor_kwargs=features_extractor_kwargs,
-            normalize_images=normalize_images,
-            optimizer_class=optimizer_class,
-            optimizer_kwargs={} if optimizer_kwargs is None else optimizer_kwargs,
-        )
+        arguments = base_arguments(super().__init__, locals())  # ActorCriticPolicy's own, as given
+        arguments["net_arch"] = dict(pi=self.policy_net_arch, vf=value_arch)
+        arguments["optimizer_kwargs"] = {} if optimizer_kwargs is None else optimizer_kwargs  # {}: no eps=1e-5
+        super().__init__(**arguments)
         if isinstance(action_space, spaces.Box):
             low = action_space.low.reshape(-1).astype(np.float64)
             high = action_space.high.reshape(-1).astype(np.float64)
