@@ -171,7 +171,7 @@ def test_logger_csv_keys(algo: Algo, tmp_path: Path) -> None:
     assert len(rows) == 2
     required = {"rollout/ep_rew_mean", "rollout/ep_len_mean", "time/fps", "time/total_timesteps", "time/iterations"}
     if algo.population:
-        required |= {"rollout/candidate_return_max", "rollout/candidate_return_mean"}
+        required |= {"rollout/candidate_return_max", "rollout/candidate_return_mean", "train/best_fitness"}
     assert required <= set(rows[0])
     for row in rows:
         assert all(row[key] != "" for key in required)
@@ -181,6 +181,10 @@ def test_logger_csv_keys(algo: Algo, tmp_path: Path) -> None:
     if algo.population:
         # One env, one episode per candidate: the first generation's episodes are the candidates'.
         assert float(rows[0]["rollout/ep_rew_mean"]) == pytest.approx(float(rows[0]["rollout/candidate_return_mean"]))
+        # No shaping, one episode: the fitness is the return, and the best so far is the generation's best.
+        best = float(rows[0]["train/best_fitness"])
+        assert best == pytest.approx(float(rows[0]["rollout/candidate_return_max"]))
+        assert float(rows[1]["train/best_fitness"]) >= best
 
 
 @pytest.mark.parametrize("algo", ALGORITHMS)

@@ -26,7 +26,12 @@ from sb3_es import ARS, CMAES, PGPE, REINFORCE, OpenES, SimpleES
 def each(cls: type, name: str, values: list[Any], match: str | None = None, **kwargs: Any) -> list[Any]:
     """One entry per bad value of one hyperparameter (with ``kwargs``); the error must name it, or match ``match``."""
     return [
-        pytest.param(cls, {**kwargs, name: value}, match or name, id="-".join([cls.__name__, *kwargs, name, str(i)]))
+        pytest.param(
+            cls,
+            {**kwargs, name: value},
+            match or name,
+            id="-".join([cls.__name__, *(f"{k}={v}" for k, v in kwargs.items()), name, str(i)]),
+        )
         for i, value in enumerate(values)
     ]
 
