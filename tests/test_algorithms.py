@@ -50,6 +50,23 @@ def assert_updates(algo: Algo, model: Any, n: int) -> None:
         assert algo.optimizer_steps(model) == n
 
 
+# ---------------------------------------------------------------------------- construction
+@pytest.mark.parametrize("algo", ALGORITHMS)
+def test_shared_parameters_reach_the_base_class(algo: Algo, tmp_path: Path) -> None:
+    """Each algorithm repeats the typed signature of its base class and passes every shared argument on."""
+    shared: dict[str, Any] = dict(tensorboard_log=str(tmp_path), seed=3, max_episode_steps=50)
+    if algo.population:
+        shared |= dict(n_eval_episodes=3, alive_bonus_offset=-1.0, reward_clip=(-2.0, 2.0), terminal_reward=0.0)
+        shared |= dict(zero_policy=False, evaluator="local")
+    kwargs = dict(stats_window_size=7, policy_kwargs=dict(net_arch=[5]))
+    model = algo.make("Pendulum-v1", 2, policy="MlpPolicy", **shared, **kwargs)
+    for name, value in shared.items():
+        assert getattr(model, name) == value, name
+    assert model._stats_window_size == 7 and model.policy_kwargs["net_arch"] == [5]
+    if algo.population:
+        assert model._env_id == "Pendulum-v1"  # for evaluator="processes" or "ray"
+
+
 # ---------------------------------------------------------------------------- learning
 @pytest.mark.parametrize("algo", ALGORITHMS)
 def test_learns_cartpole(algo: Algo) -> None:
