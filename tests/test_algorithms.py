@@ -274,6 +274,27 @@ def test_dm_control_dict_observations(algo: Algo) -> None:
     assert action.shape == (1, 6) and np.all(np.abs(action) <= 1.0)
 
 
+# ---------------------------------------------------------------------------- policy arguments
+@pytest.mark.parametrize("algo", ALGORITHMS)
+def test_sb3_actor_critic_net_arch_forms(algo: Algo, tmp_path: Path) -> None:
+    # SB3's dict form gives the policy's layers (pi); a missing vf is [] as in SB3; the old list form warns as SB3.
+    expected = policy_state(algo.make("Pendulum-v1", 2, policy="MlpPolicy", policy_kwargs=dict(net_arch=[8])))
+    forms: list[Any] = [dict(pi=[8]), dict(pi=[8], vf=[])]
+    for net_arch in forms:
+        model = algo.make("Pendulum-v1", 2, policy="MlpPolicy", policy_kwargs=dict(net_arch=net_arch))
+        assert_identical(policy_state(model), expected)
+    with pytest.warns(UserWarning, match="shared layers"):
+        model = algo.make("Pendulum-v1", 2, policy="MlpPolicy", policy_kwargs=dict(net_arch=[dict(pi=[8])]))
+    assert_identical(policy_state(model), expected)
+    model.learn(1)
+    model.save(tmp_path / "model.zip")
+    loaded = algo.cls.load(tmp_path / "model.zip")
+    assert_identical(policy_state(loaded), policy_state(model))
+    # No hidden layer in the policy: pi=[] (or no pi entry) as in SB3.
+    linear = [algo.make("Pendulum-v1", 2, policy="MlpPolicy", policy_kwargs=dict(net_arch=a)) for a in ([], {"vf": []})]
+    assert_identical(policy_state(linear[0]), policy_state(linear[1]))
+
+
 # ---------------------------------------------------------------------------- non-finite returns
 def strategy_state(model: Any) -> dict[str, Any]:
     """:return: What a failed generation must leave as it was: policy state, strategy center, best fitness."""

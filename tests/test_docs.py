@@ -1,8 +1,11 @@
-"""The Sphinx docs build without warnings (same flags as `make docs`)."""
+"""The Sphinx docs build without warnings (same flags as `make docs`); every algorithm page states what SB3 users
+need to know that differs from SB3."""
 
+import re
 from pathlib import Path
 
 import pytest
+from algorithms import ALGORITHMS, Algo
 
 DOCS_DIR = Path(__file__).resolve().parent.parent / "docs"
 
@@ -17,3 +20,15 @@ def test_docs_build(tmp_path: Path) -> None:
     args = ["-W", "--keep-going", "-b", "html", "-q", "-d", str(doctree_dir), str(DOCS_DIR), str(out_dir)]
     assert build_main(args) == 0
     assert (out_dir / "index.html").exists()
+
+
+@pytest.mark.parametrize("algo", ALGORITHMS)
+def test_algorithm_page_states_the_training_budget(algo: Algo) -> None:
+    # learn(N) ends at a generation (update) boundary, past N: each algorithm's page says so and links the details.
+    page = (DOCS_DIR / "modules" / f"{algo.cls.__module__.split('.')[1]}.md").read_text()
+    text = " ".join(page.split())
+    assert "**Training budget.**" in text
+    unit = "generation" if algo.population else "update"
+    assert re.search(rf"`learn\(N\)` completes the {unit} during which `num_timesteps` reaches `N`", text)
+    assert f"by up to one {unit}" in text and "`verbose=1` prints" in text
+    assert "design.md#timesteps-and-the-training-budget" in text

@@ -88,7 +88,18 @@ BAD_HYPERPARAMETERS = [
         REINFORCE,
         "policy_kwargs",
         [dict(net_arch=dict(pi=[8], vf=[8]))],
-        r"value_net_arch for the baseline \(not dict\(pi=",
+        r"\(vf\) of REINFORCE is its baseline.*use_baseline",
+    ),
+    *each(
+        REINFORCE,
+        "policy_kwargs",
+        [dict(net_arch=dict(pi=[8], vf=[8]), value_net_arch=[4])],
+        "both give the baseline's layers",
+        use_baseline=True,
+    ),
+    *each(REINFORCE, "policy_kwargs", [dict(net_arch=dict(pi=[8], qf=[8]))], r"unknown entry \['qf'\]"),
+    *each(
+        REINFORCE, "policy_kwargs", [dict(value_net_arch=[8, 0])], r"value_net_arch=\[8, 0\]: give a list of positive"
     ),
 ]
 

@@ -167,6 +167,31 @@ def test_resume_with_discarded_episodes_and_a_baseline(tmp_path: Path, use_basel
     )
 
 
+def value_layers(model: REINFORCE) -> list[int]:
+    """:return: The output sizes of the value network's linear layers (hidden layers, then the value head)."""
+    modules = [*model.policy.mlp_extractor.value_net, model.policy.value_net]
+    return [m.out_features for m in modules if isinstance(m, th.nn.Linear)]
+
+
+@pytest.mark.parametrize(
+    "policy_kwargs, expected",
+    [
+        (dict(net_arch=dict(pi=[8], vf=[5, 4])), [5, 4, 1]),
+        (dict(net_arch=dict(pi=[8])), [1]),  # no vf entry: [] as in SB3 (a linear baseline)
+        (dict(net_arch=[8], value_net_arch=[5]), [5, 1]),
+        (dict(net_arch=[8], value_net_arch=[]), [1]),
+        (dict(net_arch=[8]), [8, 1]),  # default: the policy's layers
+    ],
+)
+def test_baseline_layers_from_net_arch(policy_kwargs: dict[str, Any], expected: list[int]) -> None:
+    model = REINFORCE("MlpPolicy", BoxActionEnv(), use_baseline=True, policy_kwargs=policy_kwargs, seed=0)
+    assert value_layers(model) == expected
+    assert model.policy.policy_net_arch == [8]
+    # A2C's actor-critic form trains the baseline as A2C trains its critic.
+    model.learn(20)
+    assert model._n_updates >= 1
+
+
 def test_dict_observation_from_dm_control() -> None:
     shimmy = pytest.importorskip("shimmy")
     assert shimmy is not None

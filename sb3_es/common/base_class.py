@@ -11,7 +11,6 @@ from typing import Any, ClassVar, TypeVar
 
 import gymnasium as gym
 import torch as th
-from gymnasium.wrappers import TimeLimit
 from stable_baselines3.common.base_class import BaseAlgorithm, maybe_make_env
 from stable_baselines3.common.env_util import is_wrapped
 from stable_baselines3.common.on_policy_algorithm import OnPolicyAlgorithm
@@ -115,9 +114,10 @@ class ESBaseAlgorithm(BaseAlgorithm):
         if isinstance(env, str):
             env = maybe_make_env(env, verbose)
             assert isinstance(env, gym.Env)
-            if not is_wrapped(env, TimeLimit):
+            # Looked up at call time, as in evaluation/time_limit.py: rl_zoo3 replaces gymnasium's TimeLimit.
+            if not is_wrapped(env, gym.wrappers.TimeLimit):
                 self._added_time_limit = self.max_episode_steps or DEFAULT_MAX_EPISODE_STEPS
-                env = TimeLimit(env, self._added_time_limit)
+                env = gym.wrappers.TimeLimit(env, self._added_time_limit)
         if isinstance(policy, str):
             policy = self._get_policy_from_name(policy)
         super().__init__(

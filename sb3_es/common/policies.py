@@ -28,6 +28,7 @@ from stable_baselines3.common.torch_layers import create_mlp
 from stable_baselines3.common.type_aliases import PyTorchObs
 from torch import nn
 
+from sb3_es.common.net_arch import split_net_arch
 from sb3_es.common.network_layout import network_layers
 from sb3_es.evaluation.network import OBS_NORM_EPS, NetworkSpec
 from sb3_es.evaluation.observations import flat_obs_dim
@@ -42,7 +43,9 @@ class FlatPolicy(BasePolicy):
     :param observation_space: Observation space: ``Box``, ``Discrete``, ``MultiDiscrete``, ``MultiBinary`` (one-hot,
         as SB3's ``preprocess_obs``) or a ``Dict`` of them (flattened and concatenated).
     :param action_space: Action space: ``Box`` (continuous) or ``Discrete`` (argmax of the outputs).
-    :param net_arch: Sizes of the hidden layers; ``[]`` gives a linear policy. Defaults to ``[64, 64]``.
+    :param net_arch: Sizes of the hidden layers; ``[]`` gives a linear policy. Defaults to ``[64, 64]``. SB3's
+        actor-critic form ``dict(pi=[...])`` gives the same layers (``pi``); a non-empty ``vf`` is an error, as
+        there is no value network.
     :param activation_fn: Activation function after each hidden layer.
     :param with_bias: Whether the linear layers have an additive bias.
     :param squash_output: For ``Box`` actions, squash the outputs with ``tanh`` and rescale them to the
@@ -60,7 +63,7 @@ class FlatPolicy(BasePolicy):
         self,
         observation_space: spaces.Space,
         action_space: spaces.Space,
-        net_arch: list[int] | None = None,
+        net_arch: list[int] | dict[str, list[int]] | None = None,
         activation_fn: type[nn.Module] = nn.ReLU,
         with_bias: bool = True,
         squash_output: bool = True,
@@ -80,18 +83,17 @@ class FlatPolicy(BasePolicy):
             )
         obs_dim = flat_obs_dim(observation_space)
         is_box = isinstance(action_space, spaces.Box)
-        if isinstance(net_arch, dict):
+        pi_arch, vf_arch = split_net_arch(net_arch)
+        if vf_arch:
             raise ValueError(
-                f"net_arch={net_arch!r}: sb3-es population policies have no value network, so there is no "
-                "dict(pi=..., vf=...) to give. Pass the hidden layer sizes of the policy as a list, e.g. "
-                "net_arch=[64, 64]."
+                f"net_arch={net_arch!r}: sb3-es population policies have no value network, so vf={vf_arch} would "
+                f"build nothing. Give the policy's hidden layers only: net_arch=dict(pi={pi_arch}) or "
+                f"net_arch={pi_arch} (the default is [64, 64])."
             )
         super().__init__(observation_space, action_space, squash_output=is_box and squash_output)
         self.obs_dim = obs_dim
         self.action_dim = action_dim
-        self.net_arch = [64, 64] if net_arch is None else list(net_arch)
-        if any(int(n) <= 0 for n in self.net_arch):
-            raise ValueError(f"net_arch={self.net_arch}: every hidden layer size must be a positive integer.")
+        self.net_arch = [64, 64] if pi_arch is None else pi_arch
         self.activation_fn = activation_fn
         self.with_bias = with_bias
         self.layer_norm = layer_norm

@@ -109,6 +109,9 @@ class RayActorPool(WorkerPool):
         except BaseException:  # e.g. the env cannot be built: report it, and start afresh next time
             self.close()
             raise
+        # Return once Ray counts the new actors, so that a new evaluator does not see their CPUs as free.
+        total = ray_session.total_cpus()
+        ray_session.wait_for_report(lambda free: free <= total - ray_session.held_cpus() + 1e-6)
 
     def _new_actor(self) -> Any:
         cls = remote_worker_class()
@@ -120,27 +123,31 @@ class RayActorPool(WorkerPool):
         ready, not_ready = ray.wait(refs, num_returns=len(refs), timeout=self.start_timeout)
         ray.get(ready)  # raises an actor's construction error (e.g. an unknown env id)
         if not_ready:
-            total = float(ray.cluster_resources().get("CPU", 0.0))
             raise RuntimeError(
                 f"Ray could not start {len(not_ready)} of {len(refs)} actor(s) within start_timeout="
                 f"{self.start_timeout:g} s: each needs {self.num_cpus_per_worker:g} CPU(s) and the cluster has "
-                f"{ray_session.free_cpus():g} of {total:g} free ({ray_session.describe_pools()}; actors of other "
-                "drivers count too). Close evaluators you no longer use (evaluator.close()), or ask for less "
-                "(num_workers=, num_cpus_per_worker=)."
+                f"{ray_session.free_cpus():g} of {ray_session.total_cpus():g} free now, the actors that are starting "
+                f"included ({ray_session.describe_pools()}; actors of other drivers count too). Close evaluators you "
+                "no longer use (evaluator.close()), or ask for less (num_workers=, num_cpus_per_worker=); if the "
+                "CPUs were free, the actors were slow to start (imports, env construction on a loaded machine): "
+                "raise start_timeout."
             )
 
     def close(self) -> None:
         if self.actors:
             ray = import_ray()
             if ray.is_initialized():
+                free_before, held = ray_session.free_cpus(), self.cpus
                 for actor in self.actors:
                     with contextlib.suppress(Exception):  # already dead, or Ray shutting down
                         ray.kill(actor, no_restart=True)
-                # ray.kill returns at once: wait (a little) until the actors are gone, so that their CPUs are free
-                # for the next evaluator of this process when close() returns.
+                # ray.kill returns at once: wait (a little) until the actors are gone and Ray reports their CPUs
+                # free, so that the next evaluator of this process counts them when close() returns.
                 with contextlib.suppress(Exception):
                     refs = [actor.ready.remote() for actor in self.actors]
-                    ray.wait(refs, num_returns=len(refs), timeout=10.0)
+                    ray.wait(refs, num_returns=len(refs), timeout=ray_session.REPORT_TIMEOUT)
+                    total = ray_session.total_cpus()
+                    ray_session.wait_for_report(lambda free: free >= min(total, free_before + held) - 1e-6)
         self.actors = []
         self._tables = []
         self._noise_refs = {}

@@ -8,6 +8,8 @@
   or garbage-collected.
 * When actors of a new pool do not fit in the free CPUs, idle pools of this process (no generation in flight) are
   stopped to make room; they start again when their evaluator next runs.
+* Ray reports the CPUs of started and killed actors a moment late: a pool's start and close return once the report
+  shows them (:func:`wait_for_report`), so a new evaluator counts the free CPUs right whatever the timing.
 
 Ray itself is imported only when an evaluator is created.
 """
@@ -38,6 +40,9 @@ class SharedPool(Protocol):
 
     def close(self) -> None: ...
 
+
+#: Seconds to wait at most for Ray to report the CPUs of started or killed actors (see :func:`wait_for_report`).
+REPORT_TIMEOUT = 10.0
 
 _pools: dict[bytes, SharedPool] = {}
 _users: dict[int, int] = {}  # id(pool) -> number of evaluators using it
@@ -105,18 +110,44 @@ def release(key: bytes, pool: SharedPool) -> None:
         _started_here = False
 
 
+def total_cpus() -> float:
+    """:return: CPUs of the Ray cluster."""
+    return float(import_ray().cluster_resources().get("CPU", 0.0))
+
+
 def free_cpus() -> float:
-    """:return: CPUs that the Ray cluster has free now."""
+    """:return: CPUs that the Ray cluster reports free now (a moment late: see :func:`wait_for_report`)."""
     return float(import_ray().available_resources().get("CPU", 0.0))
 
 
-def make_room(cpus: float, requester: SharedPool, wait_s: float = 10.0) -> float:
+def held_cpus() -> float:
+    """:return: CPUs that the running actors of this process's pools hold."""
+    return sum(pool.cpus for pool in _pools.values() if pool.started)
+
+
+def wait_for_report(settled: Callable[[float], bool], timeout: float = REPORT_TIMEOUT) -> float:
+    """
+    Ray reports the CPUs of actors it has just started or killed a moment later (about 0.1 s, longer on a loaded
+    machine): wait until the report shows the change, so that the next evaluator counts the free CPUs right.
+
+    :param settled: Whether the free CPUs reported show the change.
+    :param timeout: Seconds to wait at most (actors of other drivers may keep the report from settling).
+    :return: The CPUs reported free.
+    """
+    deadline = time.monotonic() + timeout
+    free = free_cpus()
+    while not settled(free) and time.monotonic() < deadline:
+        time.sleep(0.02)
+        free = free_cpus()
+    return free
+
+
+def make_room(cpus: float, requester: SharedPool) -> float:
     """
     Stop idle pools of this process (oldest first) until ``cpus`` CPUs are free or none is left to stop.
 
     :param cpus: CPUs needed.
     :param requester: The pool asking (never stopped).
-    :param wait_s: How long to wait for Ray to report the CPUs of killed actors as free.
     :return: The CPUs free afterwards.
     """
     free = free_cpus()
@@ -126,15 +157,12 @@ def make_room(cpus: float, requester: SharedPool, wait_s: float = 10.0) -> float
         if pool is requester or pool.busy or not pool.started:
             continue
         held = pool.cpus
-        pool.close()
+        pool.close()  # returns once Ray reports the CPUs free (or after REPORT_TIMEOUT)
         logger.warning(
             "Stopped %g idle Ray actor CPU(s) of another evaluator in this process to make room for a new one; they "
             "start again when that evaluator next runs (close() evaluators you no longer use).",
             held,
         )
-        deadline = time.monotonic() + wait_s
-        while free_cpus() < min(cpus, free + held) and time.monotonic() < deadline:
-            time.sleep(0.05)
         free = free_cpus()
     return free
 

@@ -32,6 +32,7 @@ from stable_baselines3.common.type_aliases import PyTorchObs, Schedule
 from torch import nn
 
 from sb3_es.common.arguments import base_arguments
+from sb3_es.common.net_arch import layer_sizes, split_net_arch
 from sb3_es.evaluation.network import flat_obs_dim
 from sb3_es.reinforce.legacy import upgrade_legacy_state_dict
 
@@ -81,11 +82,14 @@ class DiscretizedPolicy(ActorCriticPolicy):
     :param joint: ``True``: one categorical over the ``n_bins ** action_dim`` combinations of levels;
         ``False``: an independent categorical per dimension.
     :param max_joint_actions: Largest number of joint actions accepted when ``joint=True``.
-    :param net_arch: Hidden layer sizes of the policy network (default ``[64, 64]``).
+    :param net_arch: Hidden layer sizes of the policy network (default ``[64, 64]``), or SB3's actor-critic form
+        ``dict(pi=[...], vf=[...])``: ``pi`` is the policy's, ``vf`` the baseline's (a non-empty ``vf`` needs
+        ``use_baseline=True``; a missing entry is ``[]``, as in SB3).
     :param activation_fn: Activation function of the hidden layers.
     :param use_baseline: Train the value network as a state-value baseline. Without it the value head is
         a single unused linear layer (``ActorCriticPolicy`` always has one) and ``predict_values`` raises.
-    :param value_net_arch: Hidden layer sizes of the value network (default: ``net_arch``).
+    :param value_net_arch: Hidden layer sizes of the value network (default: the policy's; ``[]``: a linear
+        baseline). Give it here or as the ``vf`` entry of ``net_arch``, not both.
     :param ortho_init: Orthogonal initialization as in SB3's A2C/PPO (gain 0.01 on the logits, so the
         initial policy is close to uniform over the levels).
     :param features_extractor_class: Features extractor; defaults to ``FlattenExtractor`` for ``Box``
@@ -109,7 +113,7 @@ class DiscretizedPolicy(ActorCriticPolicy):
         n_bins: int = 3,
         joint: bool = False,
         max_joint_actions: int = MAX_JOINT_ACTIONS,
-        net_arch: list[int] | None = None,
+        net_arch: list[int] | dict[str, list[int]] | None = None,
         activation_fn: type[nn.Module] = nn.Tanh,
         use_baseline: bool = False,
         value_net_arch: list[int] | None = None,
@@ -123,15 +127,19 @@ class DiscretizedPolicy(ActorCriticPolicy):
         check_action_space(action_space)
         if int(n_bins) != n_bins or n_bins < 2:
             raise ValueError(f"n_bins={n_bins}: it must be an integer >= 2 (levels per action dimension).")
-        if isinstance(net_arch, dict) or isinstance(value_net_arch, dict):
+        pi_arch, vf_arch = split_net_arch(net_arch)
+        if vf_arch is not None and value_net_arch is not None:
             raise ValueError(
-                f"net_arch={net_arch!r}, value_net_arch={value_net_arch!r}: pass lists of hidden layer sizes, "
-                "net_arch for the policy and value_net_arch for the baseline (not dict(pi=..., vf=...))."
+                f"net_arch={net_arch!r} and value_net_arch={value_net_arch!r} both give the baseline's layers: give "
+                "them once (value_net_arch, or the vf entry of net_arch)."
             )
-        self.policy_net_arch = [64, 64] if net_arch is None else [int(n) for n in net_arch]
-        self.value_net_arch = None if value_net_arch is None else [int(n) for n in value_net_arch]
-        if any(n <= 0 for n in self.policy_net_arch + (self.value_net_arch or [])):
-            raise ValueError(f"net_arch={net_arch}, value_net_arch={value_net_arch}: layer sizes must be positive.")
+        if vf_arch and not use_baseline:
+            raise ValueError(
+                f"net_arch={net_arch!r}: the value network (vf) of REINFORCE is its baseline, which is off: pass "
+                "use_baseline=True to REINFORCE, or drop the vf entry."
+            )
+        self.policy_net_arch = [64, 64] if pi_arch is None else pi_arch
+        self.value_net_arch = vf_arch if value_net_arch is None else layer_sizes(value_net_arch, "value_net_arch")
         # Set before ActorCriticPolicy.__init__, which calls _build.
         self.n_bins = int(n_bins)
         self.joint = bool(joint)
@@ -141,7 +149,9 @@ class DiscretizedPolicy(ActorCriticPolicy):
         if features_extractor_class is None:
             dict_obs = isinstance(observation_space, spaces.Dict)
             features_extractor_class = DictFlattenExtractor if dict_obs else FlattenExtractor
-        value_arch = (self.value_net_arch or self.policy_net_arch) if self.use_baseline else []
+        value_arch = self.policy_net_arch if self.value_net_arch is None else self.value_net_arch
+        if not self.use_baseline:
+            value_arch = []
         arguments = base_arguments(super().__init__, locals())  # ActorCriticPolicy's own, as given
         arguments["net_arch"] = dict(pi=self.policy_net_arch, vf=value_arch)
         arguments["optimizer_kwargs"] = {} if optimizer_kwargs is None else optimizer_kwargs  # {}: no eps=1e-5

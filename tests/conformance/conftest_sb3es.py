@@ -5,17 +5,18 @@ tests run on sb3-es's algorithms.
 
 Substitutions (made before the test modules import them):
 
-=============================  ==============================  =====================================
+=============================  ==============================  ==========================================
 name in the tests              sb3-es class                    smallest hyperparameters
-=============================  ==============================  =====================================
+=============================  ==============================  ==========================================
 ``sb3_contrib.ARS``            :class:`sb3_es.ARS`             the tests' own (same names)
 ``stable_baselines3.PPO``      :class:`sb3_es.OpenES`          ``population_size=4``
 ``sb3_contrib.TRPO``           :class:`sb3_es.CMAES`           ``population_size=4``
-``stable_baselines3.A2C``      :class:`sb3_es.REINFORCE`       ``n_episodes=2``
-=============================  ==============================  =====================================
+``stable_baselines3.A2C``      :class:`sb3_es.REINFORCE`       ``n_episodes=2``, ``use_baseline=True``
+=============================  ==============================  ==========================================
 
-The substitutes (except ARS, which has sb3-contrib's signature) drop the keyword arguments that the ES method
-does not have (``n_steps``, ``batch_size``, ``gae_lambda``, ...): they are the original algorithm's
+REINFORCE learns a value baseline in place of A2C's critic (so ``net_arch=dict(pi=..., vf=...)`` means what it
+means for A2C). The substitutes (except ARS, which has sb3-contrib's signature) drop the keyword arguments that the
+ES method does not have (``n_steps``, ``batch_size``, ``gae_lambda``, ...): they are the original algorithm's
 hyperparameters, not behaviour under test. ``policy_kwargs`` are passed unchanged.
 
 Selection: a test runs only if an sb3-es class takes part in it: one of its parameters is a substituted class,
@@ -59,7 +60,7 @@ SUBSTITUTES: dict[tuple[Any, str], type[BaseAlgorithm]] = {
     (sb3_contrib, "ARS"): sb3_es.ARS,
     (stable_baselines3, "PPO"): _substitute(sb3_es.OpenES, dict(population_size=4)),
     (sb3_contrib, "TRPO"): _substitute(sb3_es.CMAES, dict(population_size=4)),
-    (stable_baselines3, "A2C"): _substitute(sb3_es.REINFORCE, dict(n_episodes=2)),
+    (stable_baselines3, "A2C"): _substitute(sb3_es.REINFORCE, dict(n_episodes=2, use_baseline=True)),
 }
 for (module, name), substitute in SUBSTITUTES.items():
     setattr(module, name, substitute)
