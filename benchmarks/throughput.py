@@ -5,9 +5,14 @@ Command (about 5 minutes on 2 cores with the defaults, 6 with ``--profile``)::
 
     python benchmarks/throughput.py
 
+The multi-process evaluators alone (worker processes and Ray, 2 workers, against the plain 2-process loop on
+BipedalWalker-v3 and Pendulum-v1, with their startup times; about 4 minutes)::
+
+    python benchmarks/throughput.py --only processes
+
 Options: ``--seconds S`` (timed window of each measurement, default 8), ``--warmup S`` (default 1.5),
 ``--quick`` (2 s windows, smoke test; ``--seconds 0.5 --warmup 0.2`` for a still shorter one),
-``--only bipedal|pendulum``, ``--torch-threads N`` (``th.set_num_threads`` in the main process), ``--profile``
+``--only bipedal|pendulum|processes``, ``--torch-threads N`` (``th.set_num_threads`` in the main process), ``--profile``
 (also print where our engine spends its time per vec step).
 
 Every ARS measurement builds the model and its envs, warms up with a short ``learn()``, then times
@@ -358,12 +363,88 @@ def _check(label: str, value: float, target: float, unit: str = "x") -> str:
     return f"{verdict}: {label}: {value:.2f}{unit} (target >= {target:g}{unit})"
 
 
+#: Envs per worker of the sharded rows (2 workers each), per env.
+SHARDED_ENVS_PER_WORKER = {BIPEDAL: (1, 2, 4), PENDULUM: (1, 4, 8)}
+
+
+def sharded_block(env_id: str, host: str, run: Callable[..., Result]) -> tuple[list[Result], list[Result], list[str]]:
+    """
+    The rows of ``--only processes`` for one env and host: the plain 2-process loop before and after the 2-worker
+    sharded evaluator (one row per ``envs_per_worker``), which is compared with their mean, so that a drift of the
+    machine during the block shows in the two plain rows instead of in the ratio.
+
+    :return: The evaluator rows, the plain rows, the checks.
+    """
+    before = run(measure_plain_loop, env_id, 2)
+    rows = [run(measure_ours_sharded, host, env_id, 2, k) for k in SHARDED_ENVS_PER_WORKER[env_id]]
+    after = run(measure_plain_loop, env_id, 2)
+    plain_rate = (before.rate + after.rate) / 2
+    label = "Ray" if host == "ray" else "processes"
+    checks = [
+        _check(
+            f"{env_id} {label} ({r.config}) / plain loop (2 proc, mean of before and after)",
+            100 * r.rate / plain_rate,
+            90,
+            "%",
+        )
+        for r in rows
+    ]
+    startup = max(r.startup or 0.0 for r in rows)
+    if host == "processes":
+        checks.append(
+            f"{'PASS' if startup < 2 else 'FAIL'}: {env_id} processes startup: {startup:.2f} s (target < 2 s)"
+        )
+    else:
+        checks.append(f"INFO: {env_id} Ray startup (ray.init and actors): {startup:.2f} s")
+    return rows, [before, after], checks
+
+
+def processes_only(run: Callable[..., Result]) -> tuple[list[str], list[str]]:
+    """
+    ``--only processes``: the 2-worker sharded evaluators (worker processes, then Ray) against the plain 2-process
+    loop on BipedalWalker-v3 and Pendulum-v1, and one worker against the plain 1-process loop (the overhead of the
+    engine and the transport, without parallelism).
+
+    :return: The table lines and the checks.
+    """
+    lines: list[str] = []
+    checks: list[str] = []
+    hosts = ["processes", "ray"] if HAVE_RAY else ["processes"]
+    for env_id in (BIPEDAL, PENDULUM):
+        results: list[Result] = []
+        plain_rows: list[Result] = []
+        # Ray last: its daemons (GCS, raylet) keep running until ray.shutdown() and would slow later rows.
+        for host in hosts:
+            rows, plain, host_checks = sharded_block(env_id, host, run)
+            results += rows
+            plain_rows += plain
+            checks += host_checks
+        k = SHARDED_ENVS_PER_WORKER[env_id][-1]
+        one = run(measure_ours_sharded, "processes", env_id, 1, k)
+        plain1 = run(measure_plain_loop, env_id, 1)
+        checks.append(
+            f"INFO: {env_id} processes ({one.config}) / plain loop (1 proc): {100 * one.rate / plain1.rate:.0f}%"
+        )
+        plain2 = Result(env_id, "plain step loop", "2 proc, mean of the rows above", 0, 1.0)
+        plain2.steps = round(np.mean([r.rate for r in plain_rows]))
+        if lines:
+            lines.append("")
+        lines += _table([*results, one, *plain_rows, plain1], plain2, None)
+    if not HAVE_RAY:
+        checks.append("INFO: Ray rows skipped (pip install ray)")
+    return lines, checks
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0] if __doc__ else None)
     parser.add_argument("--seconds", type=float, default=8.0, help="timed window of each measurement")
     parser.add_argument("--warmup", type=float, default=1.5, help="warm-up learn() / loop before timing")
     parser.add_argument("--quick", action="store_true", help="2 s windows, 0.5 s warm-up (smoke test)")
-    parser.add_argument("--only", choices=["bipedal", "pendulum"], help="run one environment only")
+    parser.add_argument(
+        "--only",
+        choices=["bipedal", "pendulum", "processes"],
+        help="one environment only, or the 2-worker sharded evaluators against the plain loop on both",
+    )
     parser.add_argument("--profile", action="store_true", help="also profile our engine per vec step")
     parser.add_argument(
         "--torch-threads", type=int, default=0, help="th.set_num_threads() in the main process (0: torch's default)"
@@ -381,6 +462,8 @@ def main() -> None:
 
     lines: list[str] = []
     checks: list[str] = []
+    if args.only == "processes":
+        lines, checks = processes_only(run)
     if args.only in (None, "bipedal"):
         plain = run(measure_plain_loop, BIPEDAL, 2)
         ours_sub2 = run(measure_ours, BIPEDAL, 2, True)
@@ -442,9 +525,15 @@ def main() -> None:
         f"start / {os.getloadavg()[0]:.1f} at end"
     )
     print(f"- versions: {versions('sb3-contrib')}")
-    print("- 'vs plain': ratio to the plain loop with the same number of processes (BipedalWalker: 2, Pendulum: 1;")
-    print("  the checks compare every 2-worker configuration with the plain 2-process loop);")
-    print("  'vs contrib': ratio to sb3-contrib's ARS (BipedalWalker: AsyncEval 2 proc, Pendulum: single process)\n")
+    if args.only == "processes":
+        print("- 'vs plain': ratio to the mean of the plain 2-process loop rows of the same env (measured before and")
+        print("  after each host's rows); every sharded row has 2 workers except the '1 workers' row\n")
+    else:
+        print("- 'vs plain': ratio to the plain loop with the same number of processes (BipedalWalker: 2, Pendulum: 1;")
+        print("  the checks compare every 2-worker configuration with the plain 2-process loop);")
+        print(
+            "  'vs contrib': ratio to sb3-contrib's ARS (BipedalWalker: AsyncEval 2 proc, Pendulum: single process)\n"
+        )
     print("\n".join(lines))
     print()
     print("\n".join(checks))

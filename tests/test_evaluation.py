@@ -13,7 +13,7 @@ from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNormalize
 
 from sb3_es.common.policies import FlatPolicy, LinearPolicy, MlpPolicy
-from sb3_es.evaluation import PopulationResult, VecEnvEvaluator
+from sb3_es.evaluation import Generation, PopulationResult, VecEnvEvaluator
 
 
 def make_population(policy: FlatPolicy, n: int, seed: int = 0, scale: float = 0.6) -> np.ndarray:
@@ -128,7 +128,8 @@ def test_linger_keeps_all_slots_on_the_center() -> None:
         asked.append(counter[0])
         return len(asked) <= 6  # six more vec steps
 
-    result = VecEnvEvaluator(toy_vec_env(4, counter)).evaluate(policy, population, center, 1, seed=0, linger=linger)
+    generation = Generation(policy.network_spec(), population, center, 1, seed=0)
+    result = VecEnvEvaluator(toy_vec_env(4, counter)).run(generation, linger=linger)
     # First asked at the step the plain run ended on; the candidates' results are unchanged.
     assert asked[0] == plain.n_steps
     np.testing.assert_array_equal(result.returns, plain.returns)

@@ -20,6 +20,7 @@ from envs import ToyEnv
 from stable_baselines3.common.vec_env import SubprocVecEnv, VecNormalize
 
 from sb3_es import ARS
+from sb3_es.evaluation import processes
 from sb3_es.evaluation.processes import ProcessEvaluator, usable_cpus
 
 REPO = Path(__file__).resolve().parent.parent
@@ -69,16 +70,35 @@ def test_one_worker_is_the_local_engine() -> None:
     np.testing.assert_array_equal(remote.strategy.center, local.strategy.center)
 
 
-def test_reproducible_for_a_seed_and_worker_count() -> None:
-    # Pendulum's episodes depend on the reset seeds: the shares' seeds, not the timing, decide the results.
-    centers = []
-    for _ in range(2):
-        with ProcessEvaluator("Pendulum-v1", num_workers=2) as evaluator:
-            model = ARS("LinearPolicy", "Pendulum-v1", n_delta=3, seed=5, evaluator=evaluator)
+@pytest.mark.parametrize("env_id", ["Pendulum-v1", "CartPole-v1"])
+def test_reproducible_for_a_seed_and_worker_count(env_id: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """
+    The headline's settings with evaluator="processes" (one worker per CPU; two CPUs here): a seed and a worker count
+    give the same parameters whatever the timing (CartPole's episode lengths vary, so the workers linger for
+    different times); with linger=False the step counts are the same too.
+    """
+    monkeypatch.setattr(processes, "usable_cpus", lambda: 2)
+
+    def run(evaluator: str | ProcessEvaluator) -> ARS:
+        model = ARS("MlpPolicy", env_id, n_delta=4, seed=5, evaluator=evaluator)
+        try:
             model.learn(1)
             model.learn(1, reset_num_timesteps=False)
-            centers.append(model.strategy.center)
-    np.testing.assert_array_equal(centers[0], centers[1])
+        finally:
+            model._evaluator.close()  # type: ignore[union-attr]
+        assert model._n_updates == 2
+        return model
+
+    lingering = [run("processes") for _ in range(2)]
+    assert lingering[0]._evaluator.num_workers == 2  # type: ignore[union-attr]
+    strict = [run(ProcessEvaluator(env_id, num_workers=2, linger=False)) for _ in range(2)]
+    for model in (lingering[1], *strict):
+        np.testing.assert_array_equal(model.strategy.center, lingering[0].strategy.center)
+        np.testing.assert_allclose(model.policy.obs_mean.numpy(), lingering[0].policy.obs_mean.numpy(), rtol=1e-12)
+    assert strict[0].num_timesteps == strict[1].num_timesteps
+    # Two workers are not one: the shares' seeds differ from a single VecEnv's.
+    one = run(ProcessEvaluator(env_id, num_workers=1))
+    assert not np.array_equal(one.strategy.center, lingering[0].strategy.center)
 
 
 def test_models_in_a_loop() -> None:
@@ -109,6 +129,8 @@ def test_bad_arguments() -> None:
         ProcessEvaluator("Pendulum-v1", num_workers=0)
     with pytest.raises(ValueError, match="start_method='thread'"):
         ProcessEvaluator("Pendulum-v1", start_method="thread")
+    with pytest.raises(TypeError, match="env_kwarg: the env arguments of a worker are wrapper_class, env_kwargs"):
+        ProcessEvaluator("Pendulum-v1", env_kwarg={"g": 9.0})  # type: ignore[call-arg]
     evaluator = ProcessEvaluator("NoSuchEnv-v0", num_workers=1)
     with pytest.raises(Exception, match="NoSuchEnv"):
         evaluator.start()
@@ -116,8 +138,12 @@ def test_bad_arguments() -> None:
 
 
 SCRIPT = """
+import signal
 import sys
 from sb3_es import ARS
+
+# As in a terminal, whatever ignored SIGINT in the process that started the tests (e.g. a background job)
+signal.signal(signal.SIGINT, signal.default_int_handler)
 from sb3_es.evaluation.processes import ProcessEvaluator
 
 evaluator = ProcessEvaluator("Pendulum-v1", num_workers=2)

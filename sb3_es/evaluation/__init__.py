@@ -6,7 +6,7 @@ algorithm. ``RayEvaluator`` is imported on first access, so that ``import sb3_es
 
 from typing import TYPE_CHECKING, Any
 
-from sb3_es.evaluation.base import ObsStats, PopulationEvaluator, PopulationResult, StepHook
+from sb3_es.evaluation.base import Generation, ObsStats, PopulationEvaluator, PopulationResult, StepHook
 from sb3_es.evaluation.network import NetworkSpec
 from sb3_es.evaluation.processes import ProcessEvaluator
 from sb3_es.evaluation.shaping import RewardShaping
@@ -16,6 +16,7 @@ if TYPE_CHECKING:
     from sb3_es.evaluation.ray import RayEvaluator
 
 __all__ = [
+    "Generation",
     "NetworkSpec",
     "ObsStats",
     "PopulationEvaluator",

@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 from stable_baselines3.common.running_mean_std import RunningMeanStd
 
-from sb3_es.evaluation.network import HasNetworkSpec, NetworkSpec
+from sb3_es.evaluation.network import HasNetworkSpec, NetworkSpec, as_network
 from sb3_es.evaluation.shaping import RewardShaping
 from sb3_es.strategies.noise import NoiseTablePopulation
 
@@ -140,10 +140,51 @@ class PopulationResult:
         return result
 
 
-class PopulationEvaluator(ABC):
-    """Runs the candidates of a population in environments and reports their returns."""
+@dataclass(frozen=True)
+class Generation:
+    """
+    What one evaluation runs: the arguments of :meth:`PopulationEvaluator.evaluate`, the network resolved to its
+    spec. Each evaluator implements :meth:`PopulationEvaluator._evaluate` on it.
 
-    @abstractmethod
+    :param network: The network and its (frozen) observation statistics.
+    :param population: Candidate parameter vectors ``(n_candidates, num_params)``.
+    :param center: Parameters of the center (mean) policy, run by slots left idle at the end.
+    :param n_episodes: Episodes per candidate.
+    :param seed: Seed for the environments' resets in this generation.
+    :param shaping: Per-step reward shaping of the fitness; ``None`` for none.
+    :param max_episode_steps: Episode length cap (``None``: the env's own limit only).
+    """
+
+    network: NetworkSpec
+    population: np.ndarray | NoiseTablePopulation
+    center: np.ndarray
+    n_episodes: int
+    seed: int
+    shaping: RewardShaping | None = None
+    max_episode_steps: int | None = None
+
+    @property
+    def n_candidates(self) -> int:
+        """:return: Number of candidates."""
+        return int(self.population.shape[0])
+
+    @property
+    def shaped(self) -> bool:
+        """:return: Whether the fitness is shaped (``shaped_returns`` is filled in)."""
+        return self.shaping is not None and not self.shaping.is_identity
+
+    def empty_result(self) -> PopulationResult:
+        """:return: A result of the right shape with nothing in it yet."""
+        return PopulationResult.empty(self.n_candidates, self.n_episodes, self.network.obs_dim, shaped=self.shaped)
+
+
+class PopulationEvaluator(ABC):
+    """
+    Runs the candidates of a population in environments and reports their returns.
+
+    A new evaluator implements :meth:`_evaluate`; :meth:`evaluate` gathers its arguments into a :class:`Generation`.
+    """
+
     def evaluate(
         self,
         network: NetworkSpec | HasNetworkSpec,
@@ -168,6 +209,16 @@ class PopulationEvaluator(ABC):
         :param shaping: Per-step reward shaping of the fitness (``shaped_returns``); ``None`` for none.
         :param max_episode_steps: End an episode that reaches this many steps as a time limit would (see
             :func:`~sb3_es.evaluation.time_limit.end_capped_episodes`); ``None``: the env's own limit only.
+        :return: The results.
+        """
+        generation = Generation(as_network(network), population, center, n_episodes, seed, shaping, max_episode_steps)
+        return self._evaluate(generation, step_hook)
+
+    @abstractmethod
+    def _evaluate(self, generation: Generation, step_hook: StepHook | None) -> PopulationResult:
+        """
+        :param generation: What to run.
+        :param step_hook: Called once per vec step (see :data:`StepHook`); returning False stops the evaluation.
         :return: The results.
         """
 

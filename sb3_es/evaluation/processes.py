@@ -28,11 +28,12 @@ import cloudpickle
 import gymnasium as gym
 import numpy as np
 from stable_baselines3.common.vec_env import VecEnv
+from typing_extensions import Unpack
 
 from sb3_es.evaluation.pool import WorkerDied, WorkerPool
 from sb3_es.evaluation.process_worker import DRIVER_ENDS, raise_remote, worker_main
 from sb3_es.evaluation.sharded import ShardedEvaluator
-from sb3_es.evaluation.worker import env_config
+from sb3_es.evaluation.worker import WorkerEnvArgs, env_config
 from sb3_es.strategies.noise import SharedNoiseTable
 
 
@@ -237,17 +238,14 @@ class ProcessEvaluator(ShardedEvaluator):
         ``spawn`` start method it must be importable).
     :param num_workers: Number of worker processes; by default one per CPU this process may use.
     :param envs_per_worker: Env slots of each worker's VecEnv.
-    :param wrapper_class: Wrapper applied to each env after ``Monitor`` (as ``make_vec_env``).
-    :param env_kwargs: Keyword arguments for ``gym.make`` or the factory.
-    :param wrapper_kwargs: Keyword arguments for ``wrapper_class``.
-    :param vec_env_cls: VecEnv class of each worker (``DummyVecEnv`` by default).
-    :param vec_env_kwargs: Keyword arguments for ``vec_env_cls``.
-    :param monitor_kwargs: Keyword arguments for ``Monitor``.
     :param start_method: ``multiprocessing`` start method; by default ``"fork"`` on Linux, else ``"spawn"``.
     :param max_worker_restarts: Worker replacements allowed within one generation.
     :param start_timeout: Seconds to wait for a worker to build its envs.
     :param generation_timeout: Seconds a generation may take (``None``: no limit).
     :param linger: Whether a worker whose share is done runs the center policy until every share is done.
+    :param env_args: ``make_vec_env``'s other arguments for each worker's VecEnv: ``wrapper_class``, ``env_kwargs``,
+        ``wrapper_kwargs``, ``vec_env_cls`` (``DummyVecEnv`` by default), ``vec_env_kwargs``, ``monitor_kwargs``
+        (see :class:`~sb3_es.evaluation.worker.WorkerEnvArgs`).
     """
 
     worker_name = "worker process"
@@ -258,28 +256,15 @@ class ProcessEvaluator(ShardedEvaluator):
         env: str | Callable[..., gym.Env],
         num_workers: int | None = None,
         envs_per_worker: int = 1,
-        wrapper_class: Callable[[gym.Env], gym.Env] | None = None,
-        env_kwargs: dict[str, Any] | None = None,
-        wrapper_kwargs: dict[str, Any] | None = None,
-        vec_env_cls: type[VecEnv] | None = None,
-        vec_env_kwargs: dict[str, Any] | None = None,
-        monitor_kwargs: dict[str, Any] | None = None,
+        *,
         start_method: str | None = None,
         max_worker_restarts: int = 3,
         start_timeout: float = 60.0,
         generation_timeout: float | None = None,
         linger: bool = True,
+        **env_args: Unpack[WorkerEnvArgs],
     ) -> None:
-        config = env_config(
-            env,
-            envs_per_worker,
-            wrapper_class=wrapper_class,
-            env_kwargs=env_kwargs,
-            wrapper_kwargs=wrapper_kwargs,
-            vec_env_cls=vec_env_cls,
-            vec_env_kwargs=vec_env_kwargs,
-            monitor_kwargs=monitor_kwargs,
-        )
+        config = env_config(env, envs_per_worker, **env_args)
         super().__init__(config, num_workers, start_timeout, max_worker_restarts, generation_timeout, linger)
         start_method = start_method or default_start_method()
         if start_method not in mp.get_all_start_methods():

@@ -3,24 +3,14 @@
 Ray hosts the workers of a :class:`~sb3_es.evaluation.sharded.ShardedEvaluator`: each actor
 (:mod:`~sb3_es.evaluation.ray_actor`) owns an SB3 ``VecEnv`` and runs its share of the (candidate, episode) jobs
 with the local engine. Ray does the scheduling, the transport and the object store; this module only moves the
-generation's data and signals, and turns a dead actor into a :class:`~sb3_es.evaluation.sharded.WorkerDied`.
+generation's data and signals, and turns a dead actor into a :class:`~sb3_es.evaluation.pool.WorkerDied`.
 Ray's lifetime and the actor pools that evaluators share are in :mod:`~sb3_es.evaluation.ray_session`.
 
-What crosses the wire per generation (see ``docs/guide/ray.md``):
-
-* driver -> object store, once (one ``ray.put``): the center, the network spec (architecture and observation
-  statistics) and the population as float32 rows (``(n_candidates, num_params)``), or, for a
-  :class:`NoiseTablePopulation`, only the per-candidate offsets into a :class:`SharedNoiseTable` and their signed
-  scales. Each node fetches the object once; the actors on a node share it (zero-copy).
-* driver -> each actor: the object's reference, the candidate index of each of its jobs, and a seed.
-* each actor -> driver: returns and lengths of its jobs, its :class:`~sb3_es.evaluation.ObsStats` (count, mean
-  and variance, merged with Chan's parallel algorithm), Monitor episode infos, center-policy episodes, and the
-  ``dones`` and ``rewards`` of each vec step (for the callback replay).
-
-Sent once per actor (again only if the actor is replaced): the noise table's object reference.
-
-This module imports without Ray; Ray is imported when a :class:`RayEvaluator` is created. (A little over 300 lines:
-the pool and the evaluator are documented for users who run Ray clusters.)
+Per generation the driver puts the generation's data (network spec, center, population rows or noise-table
+offsets) once in the object store and sends each actor its candidates' indices and a seed; each actor sends back
+its share's results, its observation statistics and its vec steps' ``dones`` and ``rewards`` (what crosses the wire,
+with sizes: ``docs/guide/ray.md``). This module imports without Ray; Ray is imported when a :class:`RayEvaluator`
+is created.
 """
 
 from __future__ import annotations
@@ -33,13 +23,14 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 from stable_baselines3.common.vec_env import VecEnv
+from typing_extensions import Unpack
 
 from sb3_es.evaluation import ray_session
 from sb3_es.evaluation.pool import WorkerDied, WorkerPool
 from sb3_es.evaluation.ray_actor import remote_worker_class
 from sb3_es.evaluation.ray_session import import_ray
 from sb3_es.evaluation.sharded import ShardedEvaluator
-from sb3_es.evaluation.worker import env_config
+from sb3_es.evaluation.worker import WorkerEnvArgs, env_config
 from sb3_es.strategies.noise import SharedNoiseTable
 
 
@@ -221,11 +212,8 @@ class RayEvaluator(ShardedEvaluator):
     :class:`~sb3_es.evaluation.VecEnvEvaluator` (batched forward pass, as locally).
 
     Shares and seeds, lingering, the callback replay and fault tolerance are those of
-    :class:`~sb3_es.evaluation.sharded.ShardedEvaluator` (see there): share ``k`` runs on actor ``k`` with env seed
-    ``seed + k * envs_per_worker``; with one worker the results are the local engine's on a VecEnv of
-    ``envs_per_worker`` envs, bit for bit; an actor that dies is replaced and its share re-run (logged, counted in
-    :attr:`restarted_actors`, at most ``max_actor_restarts`` times per generation); an exception raised by the env
-    in an actor is raised in the driver.
+    :class:`~sb3_es.evaluation.sharded.ShardedEvaluator` (see there); a dead actor is counted in
+    :attr:`restarted_actors`, at most ``max_actor_restarts`` times per generation.
 
     Ray is started with ``ray.init(**ray_init_kwargs)`` if it is not running yet (pass
     ``ray_init_kwargs=dict(address="auto")`` to join a running cluster, or call ``ray.init`` yourself first).
@@ -240,18 +228,15 @@ class RayEvaluator(ShardedEvaluator):
         registers it) or a picklable env factory (a class, function or lambda returning a ``gym.Env``).
     :param num_workers: Number of actors; by default one per CPU available in the Ray cluster.
     :param envs_per_worker: Env slots of each actor's VecEnv.
-    :param wrapper_class: Wrapper applied to each env after ``Monitor`` (as ``make_vec_env``).
-    :param env_kwargs: Keyword arguments for ``gym.make`` or the factory.
-    :param wrapper_kwargs: Keyword arguments for ``wrapper_class``.
-    :param vec_env_cls: VecEnv class of each actor (``DummyVecEnv`` by default).
-    :param vec_env_kwargs: Keyword arguments for ``vec_env_cls``.
-    :param monitor_kwargs: Keyword arguments for ``Monitor``.
     :param num_cpus_per_worker: CPUs reserved by each actor (``ray.remote(num_cpus=...)``).
     :param ray_init_kwargs: Keyword arguments for ``ray.init`` when this evaluator starts Ray.
     :param max_actor_restarts: Actor replacements allowed within one generation.
     :param start_timeout: Seconds to wait for actors to start (at the first evaluation, and for a replacement).
     :param generation_timeout: Seconds a generation may take (``None``: no limit); see
         :class:`~sb3_es.evaluation.sharded.ShardedEvaluator`.
+    :param env_args: ``make_vec_env``'s other arguments for each actor's VecEnv: ``wrapper_class``, ``env_kwargs``,
+        ``wrapper_kwargs``, ``vec_env_cls`` (``DummyVecEnv`` by default), ``vec_env_kwargs``, ``monitor_kwargs``
+        (see :class:`~sb3_es.evaluation.worker.WorkerEnvArgs`).
     """
 
     worker_name = "Ray actor"
@@ -262,29 +247,16 @@ class RayEvaluator(ShardedEvaluator):
         env: str | Callable[..., gym.Env],
         num_workers: int | None = None,
         envs_per_worker: int = 1,
-        wrapper_class: Callable[[gym.Env], gym.Env] | None = None,
-        env_kwargs: dict[str, Any] | None = None,
-        wrapper_kwargs: dict[str, Any] | None = None,
-        vec_env_cls: type[VecEnv] | None = None,
-        vec_env_kwargs: dict[str, Any] | None = None,
-        monitor_kwargs: dict[str, Any] | None = None,
+        *,
         num_cpus_per_worker: float = 1.0,
         ray_init_kwargs: dict[str, Any] | None = None,
         max_actor_restarts: int = 3,
         start_timeout: float = 120.0,
         generation_timeout: float | None = None,
+        **env_args: Unpack[WorkerEnvArgs],
     ) -> None:
         import_ray()
-        config = env_config(
-            env,
-            envs_per_worker,
-            wrapper_class=wrapper_class,
-            env_kwargs=env_kwargs,
-            wrapper_kwargs=wrapper_kwargs,
-            vec_env_cls=vec_env_cls,
-            vec_env_kwargs=vec_env_kwargs,
-            monitor_kwargs=monitor_kwargs,
-        )
+        config = env_config(env, envs_per_worker, **env_args)
         super().__init__(config, num_workers, start_timeout, max_actor_restarts, generation_timeout)
         if not num_cpus_per_worker > 0:
             raise ValueError(f"num_cpus_per_worker={num_cpus_per_worker}: it must be positive.")

@@ -5,7 +5,7 @@ worker run its share with the local engine (see :mod:`sb3_es.evaluation.worker`)
 the center policy until every share is done (lingering), replaces a worker that dies and re-runs its share, merges
 the results (observation statistics by Chan's parallel algorithm), replays the callbacks and records timings. The
 host is a :class:`~sb3_es.evaluation.pool.WorkerPool`: it starts the workers and carries the calls and signals,
-nothing else. (A little over 300 lines: the class docstring documents, once, what both hosts do.)
+nothing else.
 """
 
 from __future__ import annotations
@@ -15,16 +15,15 @@ import logging
 import time
 import weakref
 from abc import ABC, abstractmethod
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 from stable_baselines3.common.vec_env import VecEnv
 
-from sb3_es.evaluation.base import PopulationEvaluator, PopulationResult, StepHook
-from sb3_es.evaluation.network import HasNetworkSpec, NetworkSpec, as_network
+from sb3_es.evaluation.base import Generation, PopulationEvaluator, PopulationResult, StepHook
 from sb3_es.evaluation.pool import WorkerDied, WorkerPool
-from sb3_es.evaluation.shaping import RewardShaping
+from sb3_es.evaluation.replay import replay
 from sb3_es.strategies.noise import NoiseTablePopulation
 
 logger = logging.getLogger(__name__)
@@ -57,9 +56,10 @@ class ShardedEvaluator(PopulationEvaluator, ABC):
     ``linger=False`` makes the step counts reproducible too, at the cost of idle workers. One share never lingers.
 
     Callbacks: remote steps cannot call the driver's callbacks, so when the results are back the step hook is
-    replayed once per remote vec step (see :meth:`_replay`): ``num_timesteps`` grows by exactly the env steps taken.
-    A callback that returns False stops the replay there and the generation is discarded, as in the local engine
-    (kept only if the stop came at the last replayed step); the remote work of that generation is lost.
+    replayed once per remote vec step (see :func:`~sb3_es.evaluation.replay.replay`): ``num_timesteps`` grows by
+    exactly the env steps taken. A callback that returns False stops the replay there and the generation is
+    discarded, as in the local engine (kept only if the stop came at the last replayed step); the remote work of that
+    generation is lost.
 
     Faults: a worker that dies (process killed, node lost, crash in native code) is replaced and its share re-run
     with the same seed; the event is logged (``logging`` warning) and counted in :attr:`restarted_workers`; more
@@ -160,26 +160,13 @@ class ShardedEvaluator(PopulationEvaluator, ABC):
         return self.pool.call(fn)
 
     # ------------------------------------------------------------------ evaluation
-    def evaluate(
-        self,
-        network: NetworkSpec | HasNetworkSpec,
-        population: np.ndarray | NoiseTablePopulation,
-        center: np.ndarray,
-        n_episodes: int,
-        seed: int,
-        step_hook: StepHook | None = None,
-        shaping: RewardShaping | None = None,
-        max_episode_steps: int | None = None,
-    ) -> PopulationResult:
+    def _evaluate(self, generation: Generation, step_hook: StepHook | None) -> PopulationResult:
         start_time = time.perf_counter()
-        network = as_network(network)
         pool = self.pool
         try:
             pool.busy = True
             pool.start()
-            outputs, shares = self._run_shares(
-                pool, network, population, center, n_episodes, seed, shaping, max_episode_steps
-            )
+            outputs, shares = self._run_shares(pool, generation)
         except BaseException:
             # Unfinished shares would delay the next generation (and an interrupted run must not leave busy
             # workers behind): start afresh next time.
@@ -187,9 +174,8 @@ class ShardedEvaluator(PopulationEvaluator, ABC):
             raise
         finally:
             pool.busy = False
-        n_candidates = population.shape[0]
-        shape = shaping is not None and not shaping.is_identity
-        result = PopulationResult.empty(n_candidates, n_episodes, network.obs_dim, shaped=shape)
+        n_candidates = generation.n_candidates
+        result = generation.empty_result()
         for share, output in zip(shares, outputs):
             part: PopulationResult = output["result"]
             candidates, episodes = share % n_candidates, share // n_candidates
@@ -205,7 +191,7 @@ class ShardedEvaluator(PopulationEvaluator, ABC):
             result.center_lengths.extend(part.center_lengths)
         replay_start = time.perf_counter()
         if step_hook is not None:
-            result.stopped = self._replay(outputs, step_hook)
+            result.stopped = replay(outputs, step_hook)
         end = time.perf_counter()
         self.last_timings = {
             "wall": end - start_time,
@@ -216,30 +202,20 @@ class ShardedEvaluator(PopulationEvaluator, ABC):
         }
         return result
 
-    def _run_shares(
-        self,
-        pool: WorkerPool,
-        network: NetworkSpec,
-        population: np.ndarray | NoiseTablePopulation,
-        center: np.ndarray,
-        n_episodes: int,
-        seed: int,
-        shaping: RewardShaping | None,
-        max_episode_steps: int | None,
-    ) -> tuple[list[dict[str, Any]], list[np.ndarray]]:
+    def _run_shares(self, pool: WorkerPool, generation: Generation) -> tuple[list[dict[str, Any]], list[np.ndarray]]:
         """Run the shares on the workers (replacing dead ones); return their outputs and job indices."""
         assert pool.size is not None
-        n_candidates = population.shape[0]
-        n_jobs = n_candidates * n_episodes
+        n_candidates, population, seed = generation.n_candidates, generation.population, generation.seed
+        n_jobs = n_candidates * generation.n_episodes
         # Job j is (candidate j % n_candidates, episode j // n_candidates): episode by episode, as locally.
         shares = [s for s in np.array_split(np.arange(n_jobs), min(pool.size, n_jobs)) if len(s)]
         payload: dict[str, Any] = {
-            "network": network,
-            "center": np.asarray(center, dtype=np.float64),
+            "network": generation.network,
+            "center": np.asarray(generation.center, dtype=np.float64),
             "population": None,
             "noise": None,
-            "shaping": shaping,
-            "max_episode_steps": max_episode_steps,
+            "shaping": generation.shaping,
+            "max_episode_steps": generation.max_episode_steps,
         }
         table = None
         if isinstance(population, NoiseTablePopulation):
@@ -315,34 +291,3 @@ class ShardedEvaluator(PopulationEvaluator, ABC):
             error,
             self.restarted_workers,
         )
-
-    @staticmethod
-    def _replay(outputs: Sequence[dict[str, Any]], step_hook: StepHook) -> bool:
-        """
-        Call the step hook once per remote vec step, the workers' steps interleaved (each with its ``n_envs``, its
-        real ``dones`` and ``rewards`` and, for slots whose episode ended, its infos without ``terminal_observation``;
-        ``new_obs`` and ``actions`` are ``None``: the workers do not send them back).
-
-        :return: Whether a hook call returned False before the last replayed step (the result is then discarded).
-        """
-        done_infos: list[dict[int, dict[int, dict[str, Any]]]] = []
-        for output in outputs:
-            by_step: dict[int, dict[int, dict[str, Any]]] = {}
-            for step, slot, info in output["done_infos"]:
-                by_step.setdefault(step, {})[slot] = info
-            done_infos.append(by_step)
-        n_calls = [len(output["dones"]) for output in outputs]
-        total = sum(n_calls)
-        calls = 0
-        for t in range(max(n_calls, default=0)):
-            for k, output in enumerate(outputs):
-                if t >= n_calls[k]:
-                    continue
-                dones = output["dones"][t]
-                infos: list[dict[str, Any]] = [{} for _ in range(len(dones))]
-                for slot, info in done_infos[k].get(t, {}).items():
-                    infos[slot] = dict(info)
-                calls += 1
-                if not step_hook(len(dones), infos, dones, output["rewards"][t], None, None):
-                    return calls < total
-        return False

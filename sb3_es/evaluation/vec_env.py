@@ -8,11 +8,8 @@ from collections.abc import Callable
 import numpy as np
 from stable_baselines3.common.vec_env import VecEnv
 
-from sb3_es.evaluation.base import PopulationEvaluator, PopulationResult, StepHook
-from sb3_es.evaluation.network import HasNetworkSpec, NetworkSpec, as_network
-from sb3_es.evaluation.shaping import RewardShaping
+from sb3_es.evaluation.base import Generation, PopulationEvaluator, PopulationResult, StepHook
 from sb3_es.evaluation.time_limit import end_capped_episodes
-from sb3_es.strategies.noise import NoiseTablePopulation
 
 
 class VecEnvEvaluator(PopulationEvaluator):
@@ -32,37 +29,34 @@ class VecEnvEvaluator(PopulationEvaluator):
     def __init__(self, env: VecEnv) -> None:
         self.env = env
 
-    def evaluate(
-        self,
-        network: NetworkSpec | HasNetworkSpec,
-        population: np.ndarray | NoiseTablePopulation,
-        center: np.ndarray,
-        n_episodes: int,
-        seed: int,
-        step_hook: StepHook | None = None,
-        shaping: RewardShaping | None = None,
-        max_episode_steps: int | None = None,
-        linger: Callable[[], bool] | None = None,
+    def _evaluate(self, generation: Generation, step_hook: StepHook | None) -> PopulationResult:
+        return self.run(generation, step_hook)
+
+    def run(
+        self, generation: Generation, step_hook: StepHook | None = None, linger: Callable[[], bool] | None = None
     ) -> PopulationResult:
         """
-        See :meth:`PopulationEvaluator.evaluate`.
+        The engine: see :meth:`PopulationEvaluator.evaluate`.
 
+        :param generation: What to run.
+        :param step_hook: Called once per vec step; returning False stops the evaluation.
         :param linger: Called once the candidates' episodes have all ended, and again before every further vec step:
-            while it returns True, every slot keeps running the center policy. A Ray actor that has finished its
-            share uses it to stay busy until the generation's last candidate episode, on any actor, has ended.
+            while it returns True, every slot keeps running the center policy. A worker that has finished its
+            share uses it to stay busy until the generation's last candidate episode, on any worker, has ended.
+        :return: The results.
         """
-        network = as_network(network)  # observation statistics frozen for the generation
+        network = generation.network  # observation statistics frozen for the generation
+        shaping = generation.shaping
         env = self.env
         n_envs = env.num_envs
-        n_candidates = population.shape[0]
-        shape = shaping is not None and not shaping.is_identity
-        result = PopulationResult.empty(n_candidates, n_episodes, network.obs_dim, shaped=shape)
+        result = generation.empty_result()
         returns, lengths, shaped_returns = result.returns, result.lengths, result.shaped_returns
 
-        params = np.asarray(population, dtype=np.float32)
-        center_params = np.asarray(center, dtype=np.float32)
+        params = np.asarray(generation.population, dtype=np.float32)
+        center_params = np.asarray(generation.center, dtype=np.float32)
         # Jobs run episode by episode so that every candidate gets its first episode early.
-        pending = deque((c, e) for e in range(n_episodes) for c in range(n_candidates))
+        n_candidates = generation.n_candidates
+        pending = deque((c, e) for e in range(generation.n_episodes) for c in range(n_candidates))
         remaining = len(pending)
         slot_job: list[tuple[int, int] | None] = [None] * n_envs
         active = np.zeros(n_envs, dtype=bool)  # slot runs a candidate (not the center policy)
@@ -79,7 +73,7 @@ class VecEnvEvaluator(PopulationEvaluator):
         ep_return = np.zeros(n_envs)
         ep_length = np.zeros(n_envs, dtype=np.int64)
         ep_shaped = np.zeros(n_envs)
-        env.seed(seed)
+        env.seed(generation.seed)
         obs = env.reset()
 
         while remaining > 0 or (linger is not None and linger()):
@@ -90,9 +84,8 @@ class VecEnvEvaluator(PopulationEvaluator):
             result.n_steps += n_envs
             ep_return += rewards
             ep_length += 1
-            end_capped_episodes(env, max_episode_steps, ep_length, obs, dones, infos)  # type: ignore[arg-type]
-            if shape:
-                assert shaping is not None
+            end_capped_episodes(env, generation.max_episode_steps, ep_length, obs, dones, infos)  # type: ignore[arg-type]
+            if shaping is not None and shaped_returns is not None:
                 ep_shaped += shaping(rewards, dones, infos)
             for slot in np.flatnonzero(dones).tolist():
                 job = slot_job[slot]

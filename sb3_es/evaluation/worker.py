@@ -12,13 +12,15 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from typing import Any
+from typing import Any, TypedDict
 
 import gymnasium as gym
 import numpy as np
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv
+from typing_extensions import Unpack
 
+from sb3_es.evaluation.base import Generation
 from sb3_es.evaluation.network import NetworkSpec
 from sb3_es.evaluation.vec_env import VecEnvEvaluator
 from sb3_es.strategies.noise import noise_rows
@@ -39,14 +41,35 @@ def make_env_fn(env: str | Callable[..., gym.Env]) -> Callable[..., gym.Env]:
     return env
 
 
-def env_config(env: str | Callable[..., gym.Env], envs_per_worker: int, **make_vec_env_kwargs: Any) -> dict[str, Any]:
+class WorkerEnvArgs(TypedDict, total=False):
+    """
+    The keyword arguments that a sharded evaluator (:class:`~sb3_es.evaluation.processes.ProcessEvaluator`,
+    :class:`~sb3_es.evaluation.ray.RayEvaluator`) passes to SB3's ``make_vec_env`` when a worker builds its VecEnv.
+    """
+
+    #: Wrapper applied to each env after ``Monitor`` (as ``make_vec_env``).
+    wrapper_class: Callable[[gym.Env], gym.Env] | None
+    #: Keyword arguments for ``gym.make`` or the env factory.
+    env_kwargs: dict[str, Any] | None
+    #: Keyword arguments for ``wrapper_class``.
+    wrapper_kwargs: dict[str, Any] | None
+    #: VecEnv class of each worker (``DummyVecEnv`` by default).
+    vec_env_cls: type[VecEnv] | None
+    #: Keyword arguments for ``vec_env_cls``.
+    vec_env_kwargs: dict[str, Any] | None
+    #: Keyword arguments for ``Monitor``.
+    monitor_kwargs: dict[str, Any] | None
+
+
+def env_config(
+    env: str | Callable[..., gym.Env], envs_per_worker: int, **env_args: Unpack[WorkerEnvArgs]
+) -> dict[str, Any]:
     """
     Check the env arguments of a sharded evaluator and gather them for :class:`ShareRunner`.
 
     :param env: Env id or picklable env factory.
     :param envs_per_worker: Env slots of each worker's VecEnv.
-    :param make_vec_env_kwargs: ``wrapper_class``, ``env_kwargs``, ``wrapper_kwargs``, ``vec_env_cls`` (``None``:
-        ``DummyVecEnv``), ``vec_env_kwargs``, ``monitor_kwargs``, as SB3's ``make_vec_env`` takes them.
+    :param env_args: The other keyword arguments of ``make_vec_env`` (see :class:`WorkerEnvArgs`).
     :return: The keyword arguments of ``make_vec_env``, with the env id or factory under ``"env"``.
     """
     if not (isinstance(env, str) or callable(env)):
@@ -56,8 +79,15 @@ def env_config(env: str | Callable[..., gym.Env], envs_per_worker: int, **make_v
         )
     if int(envs_per_worker) != envs_per_worker or envs_per_worker < 1:
         raise ValueError(f"envs_per_worker={envs_per_worker}: it must be a positive integer.")
-    vec_env_cls = make_vec_env_kwargs.pop("vec_env_cls", None) or DummyVecEnv
-    return dict(env=env, n_envs=int(envs_per_worker), vec_env_cls=vec_env_cls, **make_vec_env_kwargs)
+    unknown = sorted(set(env_args) - set(WorkerEnvArgs.__annotations__))
+    if unknown:
+        raise TypeError(
+            f"Unexpected keyword argument(s) {', '.join(unknown)}: the env arguments of a worker are "
+            f"{', '.join(WorkerEnvArgs.__annotations__)} (those of SB3's make_vec_env)."
+        )
+    config: dict[str, Any] = dict(env_args)
+    config["vec_env_cls"] = config.get("vec_env_cls") or DummyVecEnv
+    return dict(env=env, n_envs=int(envs_per_worker), **config)
 
 
 class ShareRunner:
@@ -137,9 +167,8 @@ class ShareRunner:
 
         start = time.perf_counter()
         try:
-            result = self.engine.evaluate(
-                network, rows, center, 1, seed, record, payload["shaping"], payload["max_episode_steps"], linger
-            )
+            generation = Generation(network, rows, center, 1, seed, payload["shaping"], payload["max_episode_steps"])
+            result = self.engine.run(generation, record, linger)
         finally:
             if share_done is not None and not linger_start:
                 share_done()  # also on an error, so that the driver's wait ends
