@@ -29,18 +29,21 @@ def replay(outputs: Sequence[dict[str, Any]], step_hook: StepHook) -> bool:
         for step, slot, info in output["done_infos"]:
             by_step.setdefault(step, {})[slot] = info
         done_infos.append(by_step)
-    n_calls = [len(output["dones"]) for output in outputs]
-    total = sum(n_calls)
+    # Rows as lists of arrays up front: the loop below runs once per remote vec step.
+    steps = [list(zip(output["dones"], output["rewards"])) for output in outputs]
+    total = sum(len(rows) for rows in steps)
     calls = 0
-    for t in range(max(n_calls, default=0)):
-        for k, output in enumerate(outputs):
-            if t >= n_calls[k]:
+    for t in range(max((len(rows) for rows in steps), default=0)):
+        for rows, ended in zip(steps, done_infos):
+            if t >= len(rows):
                 continue
-            dones = output["dones"][t]
-            infos: list[dict[str, Any]] = [{} for _ in range(len(dones))]
-            for slot, info in done_infos[k].get(t, {}).items():
-                infos[slot] = dict(info)
+            dones, rewards = rows[t]
+            n_envs = len(dones)
+            infos: list[dict[str, Any]] = [{} for _ in range(n_envs)]
+            if t in ended:
+                for slot, info in ended[t].items():
+                    infos[slot] = dict(info)
             calls += 1
-            if not step_hook(len(dones), infos, dones, output["rewards"][t], None, None):
+            if not step_hook(n_envs, infos, dones, rewards, None, None):
                 return calls < total
     return False

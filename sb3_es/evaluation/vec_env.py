@@ -11,6 +11,9 @@ from stable_baselines3.common.vec_env import VecEnv
 from sb3_es.evaluation.base import Generation, PopulationEvaluator, PopulationResult, StepHook
 from sb3_es.evaluation.time_limit import end_capped_episodes
 
+#: Observations gathered before they are added to the observation statistics.
+OBS_CHUNK_ROWS = 1024
+
 
 class VecEnvEvaluator(PopulationEvaluator):
     """
@@ -75,10 +78,19 @@ class VecEnvEvaluator(PopulationEvaluator):
         ep_shaped = np.zeros(n_envs)
         env.seed(generation.seed)
         obs = env.reset()
+        # The candidates' observations, added to the statistics a chunk at a time (an update per vec step would cost
+        # about as much as the forward pass).
+        obs_chunk = np.empty((max(OBS_CHUNK_ROWS, n_envs), network.obs_dim))
+        seen = 0
 
         while remaining > 0 or (linger is not None and linger()):
             flat_obs = network.flatten_obs(obs)  # type: ignore[arg-type]
-            result.obs_stats.add(flat_obs if active.all() else flat_obs[active])
+            rows = flat_obs if active.all() else flat_obs[active]
+            if seen + len(rows) > len(obs_chunk):
+                result.obs_stats.add(obs_chunk[:seen])
+                seen = 0
+            obs_chunk[seen : seen + len(rows)] = rows
+            seen += len(rows)
             actions = network(slot_params, flat_obs)
             obs, rewards, dones, infos = env.step(actions)
             result.n_steps += n_envs
@@ -110,4 +122,5 @@ class VecEnvEvaluator(PopulationEvaluator):
             if step_hook is not None and not step_hook(n_envs, infos, dones, rewards, obs, actions):
                 result.stopped = remaining > 0
                 break
+        result.obs_stats.add(obs_chunk[:seen])
         return result
