@@ -348,14 +348,16 @@ def _sharded_checks(env_id: str, procs: list[Result], ray_rows: list[Result], pl
         checks.append(
             _check(f"{env_id} ours ({best.config}) / plain loop (2 proc)", 100 * best.rate / plain2.rate, 90, "%")
         )
-        startup = max(r.startup or 0.0 for r in rows)
-        if label == "processes":
-            checks.append(
-                f"{'PASS' if startup < 2 else 'FAIL'}: {env_id} {label} startup: {startup:.2f} s (target < 2 s)"
-            )
-        else:
-            checks.append(f"INFO: {env_id} {label} startup (ray.init and actors): {startup:.2f} s")
+        checks.append(_startup_check(env_id, label, rows))
     return checks
+
+
+def _startup_check(env_id: str, label: str, rows: list[Result]) -> str:
+    """:return: The slowest startup of the rows: a check (< 2 s) for worker processes, information for Ray."""
+    startup = max(r.startup or 0.0 for r in rows)
+    if label == "processes":
+        return f"{'PASS' if startup < 2 else 'FAIL'}: {env_id} processes startup: {startup:.2f} s (target < 2 s)"
+    return f"INFO: {env_id} {label} startup (ray.init and actors): {startup:.2f} s"
 
 
 def _check(label: str, value: float, target: float, unit: str = "x") -> str:
@@ -389,13 +391,7 @@ def sharded_block(env_id: str, host: str, run: Callable[..., Result]) -> tuple[l
         )
         for r in rows
     ]
-    startup = max(r.startup or 0.0 for r in rows)
-    if host == "processes":
-        checks.append(
-            f"{'PASS' if startup < 2 else 'FAIL'}: {env_id} processes startup: {startup:.2f} s (target < 2 s)"
-        )
-    else:
-        checks.append(f"INFO: {env_id} Ray startup (ray.init and actors): {startup:.2f} s")
+    checks.append(_startup_check(env_id, label, rows))
     return rows, [before, after], checks
 
 
