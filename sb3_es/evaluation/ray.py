@@ -10,7 +10,7 @@ Per generation the driver puts the generation's data (network spec, center, popu
 offsets) once in the object store and sends each actor its candidates' indices and a seed; each actor sends back
 its share's results, its observation statistics and its vec steps' ``dones`` and ``rewards`` (what crosses the wire,
 with sizes: ``docs/guide/ray.md``). This module imports without Ray; Ray is imported when a :class:`RayEvaluator`
-is created.
+is created. (About 300 lines: the actor pool and the evaluator are documented for users who run Ray clusters.)
 """
 
 from __future__ import annotations
