@@ -1,0 +1,239 @@
+"""
+Verify the packaged hyperparameters (``sb3_es/hyperparams/<algo>.yml``): train each selected (algorithm, env) entry
+with ``benchmarks/compare.py`` over seeds, to the entry's own ``n_timesteps`` (or a stated cap) or until an
+evaluation reaches the env's threshold, and write one table row per entry (docs/benchmarks.md, "Verified configs").
+
+Examples::
+
+    # every entry for the cheap classic-control envs, 2 seeds, at most 300 s of training per run
+    PYTHONPATH=. python benchmarks/verify_configs.py --envs CartPole-v1 Pendulum-v1 --seeds 0 1 --max-seconds 300 \\
+        --out results/verify
+
+    # only the table, from the runs already in the output folder
+    PYTHONPATH=. python benchmarks/verify_configs.py --envs CartPole-v1 Pendulum-v1 --out results/verify --table-only
+
+Thresholds: ``--threshold ENV=X`` if given, else :data:`THRESHOLDS` (stated here where Gymnasium has none),
+else the env's ``spec.reward_threshold``. Each run's outputs are compare.py's, under
+``<out>/<algo>/<env>/`` (``results.md``, ``logs/<algo>/<env>_1_seed<s>/summary.json`` and ``evaluations.npz``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shlex
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import yaml
+
+import sb3_es
+from sb3_es.zoo import default_conf_file, sb3_es_algos
+
+#: Thresholds (mean deterministic return) where Gymnasium's ``spec.reward_threshold`` is missing or is not used.
+THRESHOLDS = {
+    "Pendulum-v1": -200.0,  # no spec threshold; rl-zoo's Pendulum results are about -150 to -200
+    "CartPole-v1": 475.0,
+    "Acrobot-v1": -100.0,
+    "MountainCar-v0": -110.0,
+    "MountainCarContinuous-v0": 90.0,
+    "LunarLander-v3": 200.0,
+    "LunarLanderContinuous-v3": 200.0,
+    "BipedalWalker-v3": 300.0,
+}
+
+#: Env steps between evaluations, by env (default :data:`DEFAULT_EVAL_FREQ`).
+EVAL_FREQ = {"CartPole-v1": 5_000, "LunarLander-v3": 50_000, "LunarLanderContinuous-v3": 50_000}
+DEFAULT_EVAL_FREQ = 20_000
+
+
+def threshold_for(env_id: str, given: dict[str, float]) -> float | None:
+    """
+    :param env_id: Env id.
+    :param given: Thresholds from the command line.
+    :return: The return threshold for ``env_id`` (None if there is none).
+    """
+    if env_id in given:
+        return given[env_id]
+    if env_id in THRESHOLDS:
+        return THRESHOLDS[env_id]
+    return gym.spec(env_id).reward_threshold
+
+
+def entries(algos: list[str], envs: list[str]) -> list[tuple[str, str, dict[str, Any]]]:
+    """
+    The packaged entries for the selected algorithms and envs (``default`` entries are not verified).
+
+    :param algos: sb3-es algorithm keys.
+    :param envs: Env ids.
+    :return: ``(algo, env_id, entry)`` in the order of ``envs`` then ``algos``.
+    """
+    found = []
+    for env_id in envs:
+        for algo in algos:
+            data = yaml.safe_load(default_conf_file(algo).read_text())
+            if env_id in data:
+                found.append((algo, env_id, data[env_id]))
+    return found
+
+
+def slug(env_id: str) -> str:
+    """:return: ``env_id`` as a folder name."""
+    return env_id.replace("/", "-")
+
+
+def run_entry(
+    algo: str, env_id: str, entry: dict[str, Any], args: argparse.Namespace, threshold: float | None
+) -> list[str]:
+    """
+    Run compare.py for one entry (skipping seeds already done).
+
+    :return: The compare.py command.
+    """
+    steps = int(float(entry["n_timesteps"]))
+    if args.max_steps:
+        steps = min(steps, args.max_steps)
+    command = [
+        sys.executable,
+        str(Path(__file__).with_name("compare.py")),
+        "--algos",
+        algo,
+        "--envs",
+        env_id,
+        "--seeds",
+        *map(str, args.seeds),
+        "--steps",
+        str(steps),
+        "--eval-freq",
+        str(EVAL_FREQ.get(env_id, DEFAULT_EVAL_FREQ)),
+        "--eval-episodes",
+        str(args.eval_episodes),
+        "--out",
+        str(Path(args.out) / algo / slug(env_id)),
+        "--skip-existing",
+        "--keep-going",
+    ]
+    if args.max_seconds:
+        command += ["--seconds", str(args.max_seconds)]
+    if threshold is not None:
+        command += ["--threshold", f"{env_id}={threshold:g}", "--stop-at-threshold"]
+    print("$ " + shlex.join(command), flush=True)
+    # compare.py reads the packaged YAML of the sb3_es it imports: make it this one (the script's folder, not the
+    # working directory, is first on a script's sys.path)
+    root = str(Path(sb3_es.__file__).resolve().parents[1])
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [root, os.environ.get("PYTHONPATH")])))
+    subprocess.run(command, check=False, env=env)
+    return command
+
+
+def seed_results(folder: Path, threshold: float | None) -> list[dict[str, Any]]:
+    """
+    :param folder: compare.py output folder of one entry.
+    :param threshold: Return threshold.
+    :return: Per seed: steps, wall-clock, final and best return, and where the threshold was first reached.
+    """
+    results = []
+    for summary_path in sorted(folder.glob("logs/*/*_seed*/summary.json")):
+        summary = json.loads(summary_path.read_text())
+        evaluations = np.load(summary_path.parent / "evaluations.npz")
+        means = [float(np.mean(r)) for r in evaluations["results"]]
+        hit = next((i for i, m in enumerate(means) if threshold is not None and m >= threshold), None)
+        results.append(
+            {
+                "seed": summary["seed"],
+                "steps": summary["env_steps"],
+                "seconds": summary["train_seconds"],
+                "final": means[-1],
+                "best": max(means),
+                "hit_steps": None if hit is None else int(evaluations["timesteps"][hit]),
+                "hit_seconds": None if hit is None else summary["eval_train_seconds"][hit],
+                "budget_steps": summary["budget_steps"],
+                "budget_seconds": summary["budget_seconds"],
+                "command": summary["command"],
+                "date": summary["date"],
+                "hardware": summary["hardware"],
+            }
+        )
+    return results
+
+
+def table(rows: list[tuple[str, str, float | None, list[dict[str, Any]]]]) -> str:
+    """
+    :param rows: ``(algo, env_id, threshold, seed results)`` per entry.
+    :return: The markdown table, one row per entry.
+    """
+    lines = [
+        "| algorithm | env | threshold | seeds | budget | steps to threshold, or final / best return | "
+        "train wall-clock (s) | reached |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for algo, env_id, threshold, results in rows:
+        if not results:
+            lines.append(f"| {algo} | {env_id} | {threshold} | 0 | | not run | | |")
+            continue
+        budget = f"{results[0]['budget_steps']:,} steps"
+        if results[0]["budget_seconds"]:
+            budget += f" or {results[0]['budget_seconds']:g} s"
+        outcome = []
+        for r in results:
+            if r["hit_steps"] is not None:
+                outcome.append(f"s{r['seed']}: {r['hit_steps']:,}")
+            else:
+                outcome.append(f"s{r['seed']}: {r['final']:.1f} / {r['best']:.1f} ({r['steps']:,} steps)")
+        seconds = ", ".join(
+            f"{r['hit_seconds'] if r['hit_seconds'] is not None else r['seconds']:,.0f}" for r in results
+        )
+        reached = sum(r["hit_steps"] is not None for r in results)
+        seeds = ", ".join(str(r["seed"]) for r in results)
+        lines.append(
+            f"| {algo} | {env_id} | {threshold:g} | {seeds} | {budget} | {'; '.join(outcome)} | {seconds} "
+            f"| {reached}/{len(results)} |"
+        )
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> str:
+    """
+    Run the selected entries and print the table.
+
+    :param argv: Arguments (defaults to ``sys.argv[1:]``).
+    :return: The table.
+    """
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--algos", nargs="+", default=sorted(sb3_es_algos()), help="sb3-es algorithm keys")
+    parser.add_argument("--envs", nargs="+", required=True, help="env ids (entries of the packaged YAML files)")
+    parser.add_argument("--seeds", nargs="+", type=int, default=[0, 1])
+    parser.add_argument("--max-steps", type=int, default=None, help="cap on the entry's n_timesteps")
+    parser.add_argument("--max-seconds", type=float, default=None, help="training wall-clock cap per run")
+    parser.add_argument("--eval-episodes", type=int, default=10)
+    parser.add_argument("--threshold", nargs="*", default=[], help="ENV_ID=RETURN, replacing the defaults")
+    parser.add_argument("--out", default="results/verify", help="output folder (one compare.py folder per entry)")
+    parser.add_argument("--table-only", action="store_true", help="only print the table from existing runs")
+    args = parser.parse_args(argv)
+    given = {}
+    for item in args.threshold:
+        env_id, sep, value = item.rpartition("=")
+        if not sep:
+            raise SystemExit(f"--threshold {item!r}: use ENV_ID=VALUE, e.g. Pendulum-v1=-200")
+        given[env_id] = float(value)
+    selected = entries(args.algos, args.envs)
+    if not selected:
+        raise SystemExit(f"No entry for {args.envs} in the packaged files of {args.algos}.")
+    rows = []
+    for algo, env_id, entry in selected:
+        threshold = threshold_for(env_id, given)
+        if not args.table_only:
+            run_entry(algo, env_id, entry, args, threshold)
+        rows.append((algo, env_id, threshold, seed_results(Path(args.out) / algo / slug(env_id), threshold)))
+    text = table(rows)
+    print(text)
+    return text
+
+
+if __name__ == "__main__":
+    main()
