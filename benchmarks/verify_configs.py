@@ -87,6 +87,11 @@ def slug(env_id: str) -> str:
     return env_id.replace("/", "-")
 
 
+def entry_folder(args: argparse.Namespace, algo: str, env_id: str) -> Path:
+    """:return: The compare.py output folder of one entry: ``<out>/<algo>/<env>[-<tag>]``."""
+    return Path(args.out) / algo / (slug(env_id) + (f"-{args.tag}" if args.tag else ""))
+
+
 def run_entry(
     algo: str, env_id: str, entry: dict[str, Any], args: argparse.Namespace, threshold: float | None
 ) -> list[str]:
@@ -114,7 +119,7 @@ def run_entry(
         "--eval-episodes",
         str(args.eval_episodes),
         "--out",
-        str(Path(args.out) / algo / slug(env_id)),
+        str(entry_folder(args, algo, env_id)),
         "--skip-existing",
         "--keep-going",
     ]
@@ -148,6 +153,7 @@ def seed_results(folder: Path, threshold: float | None) -> list[dict[str, Any]]:
                 "seed": summary["seed"],
                 "steps": summary["env_steps"],
                 "seconds": summary["train_seconds"],
+                "first": means[0],
                 "final": means[-1],
                 "best": max(means),
                 "hit_steps": None if hit is None else int(evaluations["timesteps"][hit]),
@@ -168,13 +174,13 @@ def table(rows: list[tuple[str, str, float | None, list[dict[str, Any]]]]) -> st
     :return: The markdown table, one row per entry.
     """
     lines = [
-        "| algorithm | env | threshold | seeds | budget | steps to threshold, or final / best return | "
-        "train wall-clock (s) | reached |",
-        "|---|---|---|---|---|---|---|---|",
+        "| algorithm | env | threshold | seeds | budget | start return | steps to threshold, or final / best return "
+        "(steps taken) | train wall-clock (s) | reached |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     for algo, env_id, threshold, results in rows:
         if not results:
-            lines.append(f"| {algo} | {env_id} | {threshold} | 0 | | not run | | |")
+            lines.append(f"| {algo} | {env_id} | {threshold:g} | | | | not run | | |")
             continue
         budget = f"{results[0]['budget_steps']:,} steps"
         if results[0]["budget_seconds"]:
@@ -190,8 +196,9 @@ def table(rows: list[tuple[str, str, float | None, list[dict[str, Any]]]]) -> st
         )
         reached = sum(r["hit_steps"] is not None for r in results)
         seeds = ", ".join(str(r["seed"]) for r in results)
+        start = ", ".join(f"{r['first']:.1f}" for r in results)
         lines.append(
-            f"| {algo} | {env_id} | {threshold:g} | {seeds} | {budget} | {'; '.join(outcome)} | {seconds} "
+            f"| {algo} | {env_id} | {threshold:g} | {seeds} | {budget} | {start} | {'; '.join(outcome)} | {seconds} "
             f"| {reached}/{len(results)} |"
         )
     return "\n".join(lines)
@@ -213,6 +220,7 @@ def main(argv: list[str] | None = None) -> str:
     parser.add_argument("--eval-episodes", type=int, default=10)
     parser.add_argument("--threshold", nargs="*", default=[], help="ENV_ID=RETURN, replacing the defaults")
     parser.add_argument("--out", default="results/verify", help="output folder (one compare.py folder per entry)")
+    parser.add_argument("--tag", default="", help="suffix of the entries' output folders (a re-run after a fix)")
     parser.add_argument("--table-only", action="store_true", help="only print the table from existing runs")
     args = parser.parse_args(argv)
     given = {}
@@ -229,7 +237,7 @@ def main(argv: list[str] | None = None) -> str:
         threshold = threshold_for(env_id, given)
         if not args.table_only:
             run_entry(algo, env_id, entry, args, threshold)
-        rows.append((algo, env_id, threshold, seed_results(Path(args.out) / algo / slug(env_id), threshold)))
+        rows.append((algo, env_id, threshold, seed_results(entry_folder(args, algo, env_id), threshold)))
     text = table(rows)
     print(text)
     return text
