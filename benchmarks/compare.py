@@ -558,25 +558,23 @@ def time_to_threshold(runs: list[dict[str, Any]], threshold: float) -> str:
 
     :param runs: The runs of one algorithm on one env.
     :param threshold: Return threshold.
-    :return: Table cell, e.g. ``1,959 s median (1,028 / 1,959 / >2,700 s; 2/3 seeds)``.
+    :return: Table cell, seeds in order, e.g. ``1,959 s median (1,959 / >2,700 / 1,028 s; 2/3 seeds)``.
     """
-    times, cells = [], []
+    per_seed = []  # (seconds, censored) in seed order; censored: never reached, the seconds are its budget
     for run in sorted(runs, key=lambda r: r["seed"]):
         hit = next((r for r in run["rows"] if r["mean_return"] >= threshold), None)
         if hit is None:
             # its wall-clock budget, also when it stopped earlier at its step budget (it never reached the threshold)
-            seconds = max(float(run["train_seconds"]), float(run.get("budget_seconds") or 0.0))
-            cells.append(f">{seconds:,.0f}")
+            per_seed.append((max(float(run["train_seconds"]), float(run.get("budget_seconds") or 0.0)), True))
         else:
-            seconds = hit["wall_s"]
-            cells.append(f"{seconds:,.0f}")
-        times.append(seconds)
-    reached = sum(not c.startswith(">") for c in cells)
-    order = sorted(zip(times, [c.startswith(">") for c in cells]))
+            per_seed.append((float(hit["wall_s"]), False))
+    cells = " / ".join(f"{'>' if censored else ''}{seconds:,.0f}" for seconds, censored in per_seed)
+    reached = sum(not censored for _, censored in per_seed)
+    order = sorted(per_seed)
     middle = order[(len(order) - 1) // 2 : len(order) // 2 + 1]  # one entry (odd count) or two (even)
     prefix = ">" if any(censored for _, censored in middle) else ""  # a budget in the median: a lower bound
-    median = float(np.mean([t for t, _ in middle]))
-    return f"{prefix}{median:,.0f} s median ({' / '.join(cells)} s; {reached}/{len(runs)} seeds)"
+    median = float(np.mean([seconds for seconds, _ in middle]))
+    return f"{prefix}{median:,.0f} s median ({cells} s; {reached}/{len(runs)} seeds)"
 
 
 def write_report(out: Path, runs: list[dict[str, Any]], thresholds: dict[str, float], band: str, command: str) -> Path:
