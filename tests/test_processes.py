@@ -1,5 +1,5 @@
-"""What is the worker processes' own: evaluator="processes" from an env id, reproducibility for a seed and a worker
-count, the SubprocVecEnv hint, and no process left behind (Ctrl-C, normal exit, garbage collection).
+"""What is the worker processes' own: evaluator="processes" from an env id or a VecEnv, reproducibility for a seed
+and a worker count, the SubprocVecEnv hint, and no process left behind (Ctrl-C, normal exit, garbage collection).
 
 Their behaviour as a host of the sharded evaluator (same results as locally, callbacks, faults) is tested with Ray's
 in ``test_sharded.py``."""
@@ -17,6 +17,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 from envs import ToyEnv
+from gymnasium.wrappers import ClipReward
+from sb3_contrib.common.wrappers import TimeFeatureWrapper
+from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.monitor import load_results
 from stable_baselines3.common.vec_env import SubprocVecEnv, VecNormalize
 
 from sb3_es import ARS
@@ -45,8 +49,6 @@ def wait_gone(pids: list[int], timeout: float = 30.0) -> bool:
 
 
 def test_evaluator_processes_from_env_id() -> None:
-    with pytest.raises(ValueError, match="env id"):
-        ARS("LinearPolicy", ToyEnv(), evaluator="processes")
     model = ARS("LinearPolicy", "Pendulum-v1", n_delta=2, seed=0, evaluator="processes")
     model.learn(1)
     evaluator = model._evaluator
@@ -99,6 +101,43 @@ def test_reproducible_for_a_seed_and_worker_count(env_id: str, monkeypatch: pyte
     # Two workers are not one: the shares' seeds differ from a single VecEnv's.
     one = run(ProcessEvaluator(env_id, num_workers=1))
     assert not np.array_equal(one.strategy.center, lingering[0].strategy.center)
+
+
+def test_evaluator_processes_from_a_vec_env(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    """
+    Given a VecEnv (as rl-zoo builds it), evaluator="processes" rebuilds its envs in the workers from their specs:
+    env kwargs and the wrappers outside Monitor reach the workers (same run as the explicit evaluator), the workers'
+    episodes reach the model env's Monitor file, and what cannot be rebuilt is refused by name.
+    """
+    monkeypatch.setattr(processes, "usable_cpus", lambda: 2)
+    clip = dict(wrapper_class=ClipReward, wrapper_kwargs={"min_reward": -1.0})
+
+    def run(env: object, evaluator: str | ProcessEvaluator) -> ARS:
+        model = ARS("LinearPolicy", env, n_delta=2, seed=5, evaluator=evaluator)  # type: ignore[arg-type]
+        try:
+            model.learn(1)
+        finally:
+            model._evaluator.close()  # type: ignore[union-attr]
+        return model
+
+    vec_env = make_vec_env("Pendulum-v1", n_envs=2, env_kwargs={"g": 9.0}, monitor_dir=str(tmp_path), **clip)
+    from_vec_env = run(vec_env, "processes")
+    vec_env.close()
+    episodes = load_results(str(tmp_path))
+    assert len(episodes) == 4 and (episodes["l"] == 200).all()  # 2 * n_delta candidates, one episode each
+    evaluator = from_vec_env._evaluator
+    assert isinstance(evaluator, ProcessEvaluator) and evaluator.num_workers == 2
+    explicit = run("Pendulum-v1", ProcessEvaluator("Pendulum-v1", num_workers=2, env_kwargs={"g": 9.0}, **clip))
+    np.testing.assert_array_equal(from_vec_env.strategy.center, explicit.strategy.center)
+    plain = run(make_vec_env("Pendulum-v1", n_envs=2), "processes")
+    assert not np.array_equal(plain.strategy.center, explicit.strategy.center)
+
+    with pytest.raises(ValueError, match="VecNormalize, which the workers cannot apply"):
+        ARS("LinearPolicy", VecNormalize(make_vec_env("Pendulum-v1")), evaluator="processes")
+    with pytest.raises(ValueError, match="wrapper.*TimeFeatureWrapper do not record their constructor arguments"):
+        ARS("LinearPolicy", make_vec_env("Pendulum-v1", wrapper_class=TimeFeatureWrapper), evaluator="processes")
+    with pytest.raises(ValueError, match="not built by gym.make"):
+        ARS("LinearPolicy", ToyEnv(), evaluator="processes")
 
 
 def test_models_in_a_loop() -> None:

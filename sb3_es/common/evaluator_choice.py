@@ -7,13 +7,15 @@ from typing import TYPE_CHECKING
 
 from stable_baselines3.common.vec_env import SubprocVecEnv, VecEnv, VecEnvWrapper
 
+from sb3_es.common.env_recipe import env_recipe
 from sb3_es.evaluation import PopulationEvaluator, VecEnvEvaluator
 from sb3_es.evaluation.processes import ProcessEvaluator
 
 if TYPE_CHECKING:
     from sb3_es.evaluation.ray import RayEvaluator
 
-#: The evaluators chosen by name; "processes" and "ray" build their workers' envs from the model's env id.
+#: The evaluators chosen by name; "processes" and "ray" build their workers' envs from the model's env id, or
+#: from the Gymnasium specs of its VecEnv's envs (:func:`~sb3_es.common.env_recipe.env_recipe`).
 EVALUATOR_NAMES = ("local", "processes", "ray")
 
 _FACTORY_HINT = {
@@ -22,22 +24,25 @@ _FACTORY_HINT = {
 }
 
 
-def check_evaluator(evaluator: str | PopulationEvaluator, env_id: str | None) -> None:
+def check_evaluator(evaluator: str | PopulationEvaluator, env_id: str | None, env: VecEnv | None = None) -> None:
     """
     Raise a clear error for an evaluator the model cannot use.
 
     :param evaluator: The algorithm's ``evaluator`` argument.
     :param env_id: The env id the model was given, or ``None`` if it was given an env object.
+    :param env: The model's VecEnv, whose envs the workers rebuild when there is no env id.
     """
     if isinstance(evaluator, PopulationEvaluator):
         return
     if evaluator not in EVALUATOR_NAMES:
         raise ValueError(f"evaluator={evaluator!r}: use 'local', 'processes', 'ray' or a PopulationEvaluator instance.")
     if evaluator != "local" and env_id is None:
-        raise ValueError(
-            f"evaluator={evaluator!r} builds each worker's envs from an env id, but env is not a string: pass the env "
-            f"id (env='BipedalWalker-v3'), or {_FACTORY_HINT[evaluator]}."
-        )
+        if env is None:
+            raise ValueError(
+                f"evaluator={evaluator!r} builds each worker's envs from an env id or from the model's VecEnv, but "
+                f"the model has no env: pass the env id (env='BipedalWalker-v3'), or {_FACTORY_HINT[evaluator]}."
+            )
+        env_recipe(env, evaluator)  # raises if the workers cannot rebuild the envs
 
 
 def _host(name: str) -> type[ProcessEvaluator] | type[RayEvaluator]:
@@ -67,12 +72,15 @@ def resolve_evaluator(
         host = _host(evaluator)
         if isinstance(current, host):
             return current
-        if env_id is None:
-            raise ValueError(
-                f"evaluator={evaluator!r} needs the env id the model was created with (it is not saved): set "
-                f"model.evaluator = {host.__name__}('EnvId') (from {host.__module__}) before learn()."
-            )
-        return host(env_id)
+        if env_id is not None:
+            return host(env_id)
+        if env is not None:
+            factory, env_args = env_recipe(env, evaluator)
+            return host(factory, **env_args)
+        raise ValueError(
+            f"evaluator={evaluator!r} needs the env id the model was created with (it is not saved) or an env: set "
+            f"model.evaluator = {host.__name__}('EnvId') (from {host.__module__}) before learn()."
+        )
     if env is None:
         raise ValueError("This model has no environment: pass env= to load() or call set_env() before learn().")
     if isinstance(current, VecEnvEvaluator) and current.env is env:

@@ -17,6 +17,7 @@ from sb3_es.common.base_class import ESBaseAlgorithm
 from sb3_es.common.checks import check_positive
 from sb3_es.common.evaluator_choice import check_evaluator, resolve_evaluator
 from sb3_es.common.policies import FlatPolicy, LinearPolicy, MlpPolicy
+from sb3_es.common.remote_monitor import write_remote_episodes
 from sb3_es.common.strategy_algorithm import StrategyAlgorithm, check_noise_table_size, initial_value, make_noise_table
 from sb3_es.evaluation import PopulationEvaluator, PopulationResult, RewardShaping
 
@@ -127,7 +128,7 @@ class PopulationAlgorithm(StrategyAlgorithm):
         self.zero_policy = zero_policy
         self.strategy = None
         self._env_rng = None
-        check_evaluator(evaluator, self._env_id)
+        check_evaluator(evaluator, self._env_id, self.env)
         self.evaluator = evaluator
         self._evaluator: PopulationEvaluator | None = None
         self._stop_training = False
@@ -286,6 +287,8 @@ class PopulationAlgorithm(StrategyAlgorithm):
         """
         assert self.ep_success_buffer is not None
         self._update_info_buffer([{"episode": info} for info in result.ep_infos])
+        if self._evaluator is not None:
+            write_remote_episodes(self.env, self._evaluator, result.ep_infos)
         self.ep_success_buffer.extend(result.successes)
         self.logger.record("rollout/candidate_return_mean", float(result.returns.mean()))
         self.logger.record("rollout/candidate_return_max", float(result.returns.mean(axis=1).max()))

@@ -1,0 +1,73 @@
+"""How to build a VecEnv's envs again in a worker: the recipe read from the Gymnasium specs of its envs.
+
+``evaluator="processes"`` or ``"ray"`` needs each worker to build envs like the model's. Given an env id that is
+the id; given a VecEnv (as rl-zoo's ``ExperimentManager`` or ``make_vec_env`` builds it), the recipe is read from
+``env.spec`` of its envs: ``gym.make`` of the spec with the wrappers applied before SB3's ``Monitor``, then the
+wrappers applied after it (``make_vec_env``'s ``wrapper_class``), each rebuilt from its recorded constructor
+arguments. What cannot be rebuilt (an env without a spec, a wrapper that does not record its arguments, a VecEnv
+wrapper such as ``VecNormalize``, envs that differ) raises an error naming it, rather than being dropped.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+from typing import Any
+
+import gymnasium as gym
+from gymnasium.envs.registration import EnvSpec, WrapperSpec, load_env_creator
+from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
+
+from sb3_es.evaluation.worker import WorkerEnvArgs
+
+_MONITOR = "stable_baselines3.common.monitor:Monitor"
+
+
+def _apply_wrappers(env: gym.Env, wrappers: tuple[WrapperSpec, ...]) -> gym.Env:
+    for wrapper in wrappers:
+        wrapper_cls: Any = load_env_creator(wrapper.entry_point)
+        env = wrapper_cls(env, **(wrapper.kwargs or {}))
+    return env
+
+
+def env_recipe(env: VecEnv, evaluator: str) -> tuple[functools.partial[gym.Env], WorkerEnvArgs]:
+    """
+    The env factory and ``make_vec_env`` arguments with which a worker builds envs like those of ``env``.
+
+    :param env: The model's VecEnv.
+    :param evaluator: The evaluator's name, for the error messages.
+    :return: A picklable factory (``gym.make`` of the spec, with the wrappers inside ``Monitor``) and the worker
+        env arguments (``wrapper_class`` for the wrappers outside ``Monitor``).
+    """
+    fix = (
+        f"give the env id instead (env='BipedalWalker-v3'), or pass evaluator=ProcessEvaluator(env_factory) / "
+        f"RayEvaluator(env_factory) built with a factory for your envs (evaluator={evaluator!r} builds every "
+        f"worker's envs itself)"
+    )
+    if isinstance(env, VecEnvWrapper):
+        raise ValueError(
+            f"evaluator={evaluator!r}: the env is wrapped in {type(env).__name__}, which the workers cannot apply "
+            f"to their own envs: remove the VecEnv wrapper (the policies normalize observations themselves), or {fix}."
+        )
+    specs: list[EnvSpec | None] = env.get_attr("spec")
+    spec = specs[0]
+    if spec is None:
+        raise ValueError(f"evaluator={evaluator!r}: the env was not built by gym.make (it has no spec): {fix}.")
+    if any(other != spec for other in specs[1:]):
+        raise ValueError(f"evaluator={evaluator!r}: the VecEnv's envs differ (their specs are not equal): {fix}.")
+    wrappers = tuple(spec.additional_wrappers)
+    names = [wrapper.entry_point for wrapper in wrappers]
+    cut = names.index(_MONITOR) if _MONITOR in names else len(wrappers)
+    inner, outer = wrappers[:cut], wrappers[cut + 1 :]
+    opaque = [wrapper.name for wrapper in inner + outer if wrapper.kwargs is None]
+    if opaque:
+        raise ValueError(
+            f"evaluator={evaluator!r}: the env's wrapper(s) {', '.join(opaque)} do not record their constructor "
+            f"arguments (gymnasium.utils.RecordConstructorArgs), so a worker cannot rebuild them: {fix}."
+        )
+    factory = functools.partial(gym.make, dataclasses.replace(spec, additional_wrappers=inner))
+    args: WorkerEnvArgs = {}
+    if outer:
+        wrap: Any = functools.partial(_apply_wrappers, wrappers=outer)
+        args["wrapper_class"] = wrap
+    return factory, args
