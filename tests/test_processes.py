@@ -63,7 +63,7 @@ def test_evaluator_processes_from_env_id() -> None:
 
 def test_one_worker_is_the_local_engine() -> None:
     local = ARS("LinearPolicy", "Pendulum-v1", n_delta=2, seed=3)
-    with ProcessEvaluator("Pendulum-v1", num_workers=1) as evaluator:
+    with ProcessEvaluator("Pendulum-v1", num_workers=1, envs_per_worker=1) as evaluator:
         remote = ARS("LinearPolicy", "Pendulum-v1", n_delta=2, seed=3, evaluator=evaluator)
         for model in (local, remote):
             model.learn(1)

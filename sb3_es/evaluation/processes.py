@@ -255,7 +255,7 @@ class ProcessEvaluator(ShardedEvaluator):
         self,
         env: str | Callable[..., gym.Env],
         num_workers: int | None = None,
-        envs_per_worker: int = 1,
+        envs_per_worker: int = 4,
         *,
         start_method: str | None = None,
         max_worker_restarts: int = 3,

@@ -246,7 +246,7 @@ class RayEvaluator(ShardedEvaluator):
         self,
         env: str | Callable[..., gym.Env],
         num_workers: int | None = None,
-        envs_per_worker: int = 1,
+        envs_per_worker: int = 4,
         *,
         num_cpus_per_worker: float = 1.0,
         ray_init_kwargs: dict[str, Any] | None = None,
