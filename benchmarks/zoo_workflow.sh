@@ -3,8 +3,9 @@
 # one core once the packages are installed):
 #   1. build the wheel from a copy of the source tree and install it with [zoo] into a new virtual environment;
 #   2. from a folder outside the source tree, for every key of sb3_es.zoo.ALGOS: train (Pendulum-v1, the
-#      packaged config), enjoy, record_video, and train -optimize (2 trials, CartPole-v1, which has no entry in
-#      most files: the 'default' fallback line is checked);
+#      packaged file: its Pendulum-v1 entry, or its 'default' entry where it has none, as the log line says), enjoy,
+#      record_video, and train -optimize (2 trials, CartPole-v1, which has no entry in most files: the 'default'
+#      fallback line is checked);
 #   3. record_training (through the sb3-es console script), a second seed per key, plot_train, all_plots and
 #      plot_from_file (rliable's intervals and IQM; it needs two runs per algorithm).
 # Any failure stops the script with a non-zero exit status; the last lines sum up what ran and where.
@@ -68,7 +69,7 @@ KEYS="$("$PY" -c 'from sb3_es.zoo import ALGOS; print(*ALGOS)')"
 echo "sb3-es keys: $KEYS"
 
 zoo() { nice -n 19 "$PY" -m sb3_es.zoo "$@"; }
-small() {  # -params that keep one generation (update) small on Pendulum-v1: 800 env steps on 2 env slots
+small() {  # -params that keep one generation (update) small on Pendulum-v1: 800 env steps (REINFORCE: 400)
     case "$1" in
         ars_es) echo "n_delta:2" ;;
         reinforce) echo "n_episodes:2" ;;
@@ -78,9 +79,11 @@ small() {  # -params that keep one generation (update) small on Pendulum-v1: 800
 train() {  # train KEY SEED: Pendulum-v1, 1,600 steps, evaluations at 800 and 1,600 (2 episodes each)
     zoo train --algo "$1" --env Pendulum-v1 -n 1600 --seed "$2" -tb tb --eval-freq 800 --eval-episodes 2 \
         --verbose 0 --num-threads 1 -params $(small "$1") > "train-$1-$2.log" 2>&1 || { cat "train-$1-$2.log"; exit 1; }
-    # the packaged file of the installed wheel, and its env entry
-    grep -F "sb3-es: $1 on Pendulum-v1: hyperparameters from the Pendulum-v1 entry of $SITE/hyperparams/$1.yml" \
-        "train-$1-$2.log" || fail "train $1: no line naming the packaged file"
+    # the packaged file of the installed wheel, and the entry used: Pendulum-v1's, or 'default' (a file without a
+    # Pendulum-v1 entry: the ones that failed verification were removed)
+    grep -E "sb3-es: ($1 on Pendulum-v1: hyperparameters from the Pendulum-v1 entry of $SITE/hyperparams/$1\.yml|\
+$SITE/hyperparams/$1\.yml has no Pendulum-v1 entry: $1 trains with its 'default' entry)" "train-$1-$2.log" \
+        || fail "train $1: no line naming the packaged file and its entry"
     tail -n 4 "train-$1-$2.log"
 }
 
