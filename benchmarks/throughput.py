@@ -6,7 +6,9 @@ Command (about 5 minutes on 2 cores with the defaults, 6 with ``--profile``)::
     python benchmarks/throughput.py
 
 The multi-process evaluators alone (worker processes and Ray, 2 workers, against the plain 2-process loop on
-BipedalWalker-v3 and Pendulum-v1, with their startup times; about 4 minutes)::
+BipedalWalker-v3 and Pendulum-v1, with their startup times; about 4 minutes); for each host, one row per
+``envs_per_worker`` and one with the evaluator's defaults, as ``evaluator="processes"`` / ``"ray"`` builds it
+(labelled ``default``: one worker per CPU, 4 env slots each)::
 
     python benchmarks/throughput.py --only processes
 
@@ -57,8 +59,8 @@ from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv
 from sb3_es import ARS
 from sb3_es.evaluation.base import ObsStats
 from sb3_es.evaluation.network import NetworkSpec
-from sb3_es.evaluation.processes import ProcessEvaluator
-from sb3_es.evaluation.sharded import ShardedEvaluator
+from sb3_es.evaluation.processes import ProcessEvaluator, usable_cpus
+from sb3_es.evaluation.sharded import DEFAULT_ENVS_PER_WORKER, ShardedEvaluator
 
 HAVE_RAY = importlib.util.find_spec("ray") is not None
 
@@ -144,12 +146,17 @@ def measure_ours(env_id: str, n_envs: int, subproc: bool, seconds: float, warmup
 
 
 def measure_ours_sharded(
-    host: str, env_id: str, workers: int, envs_per_worker: int, seconds: float, warmup: float
+    host: str, env_id: str, workers: int | None, envs_per_worker: int | None, seconds: float, warmup: float
 ) -> Result:
     """
     Our ARS with a sharded evaluator: ``workers`` worker processes (``host="processes"``) or Ray actors
     (``host="ray"``), each running ``envs_per_worker`` env slots. The startup is timed separately.
+
+    With ``workers`` and ``envs_per_worker`` both ``None``, the evaluator's defaults (as ``evaluator="processes"`` or
+    ``evaluator="ray"`` builds it): the row is labelled ``default``.
     """
+    given = {"num_workers": workers, "envs_per_worker": envs_per_worker}
+    layout = {key: value for key, value in given.items() if value is not None}
     start = time.perf_counter()
     evaluator: ShardedEvaluator
     if host == "ray":
@@ -157,15 +164,17 @@ def measure_ours_sharded(
 
         from sb3_es.evaluation.ray import RayEvaluator
 
-        evaluator = RayEvaluator(env_id, num_workers=workers, envs_per_worker=envs_per_worker)
+        evaluator = RayEvaluator(env_id, **layout)
     else:
-        evaluator = ProcessEvaluator(env_id, num_workers=workers, envs_per_worker=envs_per_worker)
+        evaluator = ProcessEvaluator(env_id, **layout)
     try:
         evaluator.start()
         startup = time.perf_counter() - start
         model = ARS("MlpPolicy", env_id, n_delta=N_DELTA, seed=0, evaluator=evaluator)
         name = "Ray" if host == "ray" else "processes"
-        config = f"{name} {workers} workers x {envs_per_worker} envs ({workers} proc)"
+        n, k = evaluator.pool.size, evaluator.envs_per_worker
+        label = f"{name} default: " if not layout else f"{name} "
+        config = f"{label}{n} workers x {k} envs ({n} proc)"
         result = _time_model(model, env_id, "sb3-es ARS", config, seconds, warmup, per_step=False)
         result.startup = startup
         return result
@@ -378,7 +387,11 @@ def sharded_block(env_id: str, host: str, run: Callable[..., Result]) -> tuple[l
     :return: The evaluator rows, the plain rows, the checks.
     """
     before = run(measure_plain_loop, env_id, 2)
-    rows = [run(measure_ours_sharded, host, env_id, 2, k) for k in SHARDED_ENVS_PER_WORKER[env_id]]
+    # The evaluator's defaults (one worker per CPU, DEFAULT_ENVS_PER_WORKER slots) get their own row, labelled
+    # "default"; on a 2-CPU machine it replaces the explicit row of the same layout.
+    explicit = [k for k in SHARDED_ENVS_PER_WORKER[env_id] if not (k == DEFAULT_ENVS_PER_WORKER and usable_cpus() == 2)]
+    rows = [run(measure_ours_sharded, host, env_id, 2, k) for k in explicit]
+    rows.append(run(measure_ours_sharded, host, env_id, None, None))
     after = run(measure_plain_loop, env_id, 2)
     plain_rate = (before.rate + after.rate) / 2
     label = "Ray" if host == "ray" else "processes"
@@ -523,7 +536,8 @@ def main() -> None:
     print(f"- versions: {versions('sb3-contrib')}")
     if args.only == "processes":
         print("- 'vs plain': ratio to the mean of the plain 2-process loop rows of the same env (measured before and")
-        print("  after each host's rows); every sharded row has 2 workers except the '1 workers' row\n")
+        print("  after each host's rows); the sharded rows have 2 workers, except the '1 workers' row and the")
+        print("  'default' row: the evaluator's own defaults (one worker per CPU, DEFAULT_ENVS_PER_WORKER slots)\n")
     else:
         print("- 'vs plain': ratio to the plain loop with the same number of processes (BipedalWalker: 2, Pendulum: 1;")
         print("  the checks compare every 2-worker configuration with the plain 2-process loop);")

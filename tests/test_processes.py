@@ -24,8 +24,10 @@ from stable_baselines3.common.monitor import load_results
 from stable_baselines3.common.vec_env import SubprocVecEnv, VecNormalize
 
 from sb3_es import ARS
-from sb3_es.evaluation import processes
+from sb3_es.common.policies import MlpPolicy
+from sb3_es.evaluation import VecEnvEvaluator, processes
 from sb3_es.evaluation.processes import ProcessEvaluator, usable_cpus
+from sb3_es.evaluation.sharded import DEFAULT_ENVS_PER_WORKER
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -62,14 +64,34 @@ def test_evaluator_processes_from_env_id() -> None:
 
 
 def test_one_worker_is_the_local_engine() -> None:
-    local = ARS("LinearPolicy", "Pendulum-v1", n_delta=2, seed=3)
-    with ProcessEvaluator("Pendulum-v1", num_workers=1, envs_per_worker=1) as evaluator:
+    """One worker with the default env slots runs the local engine on a VecEnv of that many envs, bit for bit."""
+    local = ARS("LinearPolicy", make_vec_env("Pendulum-v1", n_envs=DEFAULT_ENVS_PER_WORKER), n_delta=2, seed=3)
+    with ProcessEvaluator("Pendulum-v1", num_workers=1) as evaluator:
         remote = ARS("LinearPolicy", "Pendulum-v1", n_delta=2, seed=3, evaluator=evaluator)
         for model in (local, remote):
             model.learn(1)
             model.learn(1, reset_num_timesteps=False)
     assert remote.num_timesteps == local.num_timesteps == 2 * 4 * 200
     np.testing.assert_array_equal(remote.strategy.center, local.strategy.center)
+
+
+def test_default_env_slots_are_seeded_as_one_vec_env() -> None:
+    """
+    The documented default, 4 env slots per worker: worker ``k`` seeds its slots with ``seed + 4 * k``, so two
+    workers run 8 candidates (one per slot) exactly as a local VecEnv of 8 envs does (Pendulum's random starts
+    depend on the seed: a worker with one slot would run its 4 candidates one after the other from other starts).
+    """
+    assert DEFAULT_ENVS_PER_WORKER == 4
+    env = make_vec_env("Pendulum-v1", n_envs=2 * DEFAULT_ENVS_PER_WORKER)
+    policy = MlpPolicy(env.observation_space, env.action_space, net_arch=[8])
+    population = np.random.default_rng(0).normal(scale=0.5, size=(8, policy.num_params))
+    center = population.mean(axis=0)
+    local = VecEnvEvaluator(env).evaluate(policy, population, center, 1, seed=11)
+    with ProcessEvaluator("Pendulum-v1", num_workers=2, linger=False) as evaluator:
+        assert evaluator.envs_per_worker == DEFAULT_ENVS_PER_WORKER
+        remote = evaluator.evaluate(policy, population, center, 1, seed=11)
+    np.testing.assert_array_equal(remote.returns, local.returns)
+    assert remote.n_steps == local.n_steps == 8 * 200
 
 
 @pytest.mark.parametrize("env_id", ["Pendulum-v1", "CartPole-v1"])

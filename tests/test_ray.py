@@ -21,9 +21,11 @@ ray = pytest.importorskip("ray")
 
 from envs import StepCounter, ToyEnv  # noqa: E402
 from sharded_helpers import ENVS_PER_WORKER, learn_generations, make_ars, toy_policy, toy_population  # noqa: E402
+from stable_baselines3.common.env_util import make_vec_env  # noqa: E402
 
 from sb3_es import ARS  # noqa: E402
 from sb3_es.evaluation.ray import RayEvaluator  # noqa: E402
+from sb3_es.evaluation.sharded import DEFAULT_ENVS_PER_WORKER  # noqa: E402
 
 pytestmark = pytest.mark.ray
 
@@ -75,7 +77,7 @@ def test_evaluator_ray_from_env_id(toy_ray: RayEvaluator) -> None:
     # toy_ray holds one of the two CPUs, so evaluator="ray" gets one worker (one per available CPU).
     with pytest.raises(ValueError, match="env id"):
         ARS("LinearPolicy", ToyEnv(), evaluator="ray")
-    local = ARS("LinearPolicy", "Pendulum-v1", n_delta=1, seed=0)
+    local = ARS("LinearPolicy", make_vec_env("Pendulum-v1", n_envs=DEFAULT_ENVS_PER_WORKER), n_delta=1, seed=0)
     remote = ARS("LinearPolicy", "Pendulum-v1", n_delta=1, seed=0, evaluator="ray")
     try:
         local.learn(1)
@@ -83,9 +85,10 @@ def test_evaluator_ray_from_env_id(toy_ray: RayEvaluator) -> None:
         evaluator = remote._evaluator
         assert isinstance(evaluator, RayEvaluator)
         assert evaluator.env == "Pendulum-v1"
-        # One env slot, seeded as locally: Pendulum's random starts included, the same generation bit for bit.
-        assert evaluator.num_workers == 1
-        assert remote.num_timesteps == local.num_timesteps == 2 * 200
+        # One actor with the default env slots, seeded as a local VecEnv of as many envs: Pendulum's random starts
+        # included, the same generation bit for bit (2 candidates, 2 slots on the center policy).
+        assert evaluator.num_workers == 1 and evaluator.envs_per_worker == DEFAULT_ENVS_PER_WORKER
+        assert remote.num_timesteps == local.num_timesteps == DEFAULT_ENVS_PER_WORKER * 200
         np.testing.assert_array_equal(remote.strategy.center, local.strategy.center)
     finally:
         if remote._evaluator is not None:
@@ -115,9 +118,10 @@ def test_models_in_a_loop_share_and_release_actors(toy_ray: RayEvaluator, caplog
             model.learn(1)
             assert isinstance(model._evaluator, RayEvaluator)
             evaluators.append(model._evaluator)
-            # One worker runs the two candidates' episodes one after the other (no lingering with one share).
+            # One worker runs the two candidates' episodes side by side, its other default slots on the center
+            # policy (no lingering with one share).
             assert model._evaluator.num_workers == 1
-            assert model._n_updates == 1 and model.num_timesteps == 2 * 200
+            assert model._n_updates == 1 and model.num_timesteps == DEFAULT_ENVS_PER_WORKER * 200
     assert not [r for r in caplog.records if "idle Ray actor" in r.getMessage()]
     assert [a._actor_id for a in toy_ray._actors] == toy_actors
     actors = evaluators[0]._actors
@@ -127,7 +131,7 @@ def test_models_in_a_loop_share_and_release_actors(toy_ray: RayEvaluator, caplog
     # The actors live while an evaluator uses them, and are killed when the last one is closed.
     for evaluator in evaluators[:-1]:
         evaluator.close()
-    assert ray.get(actors[0].ready.remote(), timeout=60) == 1
+    assert ray.get(actors[0].ready.remote(), timeout=60) == DEFAULT_ENVS_PER_WORKER
     evaluators[-1].close()
     assert_dead(actors)
     # A new model after the closed ones gets a worker again at once.
