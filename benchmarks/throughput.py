@@ -60,7 +60,8 @@ from sb3_es import ARS
 from sb3_es.evaluation.base import ObsStats
 from sb3_es.evaluation.network import NetworkSpec
 from sb3_es.evaluation.processes import ProcessEvaluator, usable_cpus
-from sb3_es.evaluation.sharded import DEFAULT_ENVS_PER_WORKER, ShardedEvaluator
+from sb3_es.evaluation.sharded import ShardedEvaluator
+from sb3_es.evaluation.worker import DEFAULT_ENVS_PER_WORKER
 
 HAVE_RAY = importlib.util.find_spec("ray") is not None
 

@@ -27,7 +27,7 @@ from sb3_es import ARS
 from sb3_es.common.policies import MlpPolicy
 from sb3_es.evaluation import VecEnvEvaluator, processes
 from sb3_es.evaluation.processes import ProcessEvaluator, usable_cpus
-from sb3_es.evaluation.sharded import DEFAULT_ENVS_PER_WORKER
+from sb3_es.evaluation.worker import DEFAULT_ENVS_PER_WORKER
 
 REPO = Path(__file__).resolve().parent.parent
 

@@ -25,7 +25,7 @@ from stable_baselines3.common.env_util import make_vec_env  # noqa: E402
 
 from sb3_es import ARS  # noqa: E402
 from sb3_es.evaluation.ray import RayEvaluator  # noqa: E402
-from sb3_es.evaluation.sharded import DEFAULT_ENVS_PER_WORKER  # noqa: E402
+from sb3_es.evaluation.worker import DEFAULT_ENVS_PER_WORKER  # noqa: E402
 
 pytestmark = pytest.mark.ray
 

@@ -32,8 +32,8 @@ from typing_extensions import Unpack
 
 from sb3_es.evaluation.pool import WorkerDied, WorkerPool
 from sb3_es.evaluation.process_worker import DRIVER_ENDS, raise_remote, worker_main
-from sb3_es.evaluation.sharded import DEFAULT_ENVS_PER_WORKER, ShardedEvaluator
-from sb3_es.evaluation.worker import WorkerEnvArgs, env_config
+from sb3_es.evaluation.sharded import ShardedEvaluator
+from sb3_es.evaluation.worker import DEFAULT_ENVS_PER_WORKER, WorkerEnvArgs, env_config
 from sb3_es.strategies.noise import SharedNoiseTable
 
 
@@ -238,7 +238,7 @@ class ProcessEvaluator(ShardedEvaluator):
         ``spawn`` start method it must be importable).
     :param num_workers: Number of worker processes; by default one per CPU this process may use.
     :param envs_per_worker: Env slots of each worker's VecEnv; by default
-        :data:`~sb3_es.evaluation.sharded.DEFAULT_ENVS_PER_WORKER` (4): the slots share one batched forward pass per
+        :data:`~sb3_es.evaluation.worker.DEFAULT_ENVS_PER_WORKER` (4): the slots share one batched forward pass per
         vec step (with one slot, two workers ran at 77% of a plain 2-process step loop on BipedalWalker-v3 and 48% on
         Pendulum-v1; with four, at 94-98%).
     :param start_method: ``multiprocessing`` start method; by default ``"fork"`` on Linux, else ``"spawn"``.

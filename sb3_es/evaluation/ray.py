@@ -29,8 +29,8 @@ from sb3_es.evaluation import ray_session
 from sb3_es.evaluation.pool import WorkerDied, WorkerPool
 from sb3_es.evaluation.ray_actor import remote_worker_class
 from sb3_es.evaluation.ray_session import import_ray
-from sb3_es.evaluation.sharded import DEFAULT_ENVS_PER_WORKER, ShardedEvaluator
-from sb3_es.evaluation.worker import WorkerEnvArgs, env_config
+from sb3_es.evaluation.sharded import ShardedEvaluator
+from sb3_es.evaluation.worker import DEFAULT_ENVS_PER_WORKER, WorkerEnvArgs, env_config
 from sb3_es.strategies.noise import SharedNoiseTable
 
 
@@ -228,7 +228,7 @@ class RayEvaluator(ShardedEvaluator):
         registers it) or a picklable env factory (a class, function or lambda returning a ``gym.Env``).
     :param num_workers: Number of actors; by default one per CPU available in the Ray cluster.
     :param envs_per_worker: Env slots of each actor's VecEnv; by default
-        :data:`~sb3_es.evaluation.sharded.DEFAULT_ENVS_PER_WORKER` (4), as for worker processes: the slots share one
+        :data:`~sb3_es.evaluation.worker.DEFAULT_ENVS_PER_WORKER` (4), as for worker processes: the slots share one
         batched forward pass per vec step.
     :param num_cpus_per_worker: CPUs reserved by each actor (``ray.remote(num_cpus=...)``).
     :param ray_init_kwargs: Keyword arguments for ``ray.init`` when this evaluator starts Ray.

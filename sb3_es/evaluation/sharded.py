@@ -31,15 +31,6 @@ logger = logging.getLogger(__name__)
 #: Names the lingering signals of each generation (unique in the process, shared pools included).
 _TOKENS = itertools.count(1)
 
-#: Env slots of each worker's VecEnv unless ``envs_per_worker`` says otherwise (worker processes and Ray actors).
-#: The slots of a worker share one batched forward pass per vec step, so with several slots a worker pays the
-#: forward pass and the engine's bookkeeping once per several env steps, and a slot left without a candidate at
-#: the tail of a generation costs little (it runs the center policy). Measured with
-#: ``python benchmarks/throughput.py --only processes`` (2 workers on a 2-core machine, ARS MlpPolicy, n_delta=8,
-#: two runs; docs/benchmarks.md): 1 slot ran at 77%/79% (BipedalWalker-v3) and 48%/48% (Pendulum-v1) of the plain
-#: 2-process ``env.step`` loop, 4 slots at 94%/95% and 95%/98%.
-DEFAULT_ENVS_PER_WORKER = 4
-
 
 def _remaining(deadline: float | None) -> float | None:
     return None if deadline is None else max(0.0, deadline - time.monotonic())
