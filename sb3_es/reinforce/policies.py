@@ -11,7 +11,8 @@ from ``low`` to ``high`` (3 levels on BipedalWalker give the torques ``-1, 0, 1`
 
 A native ``Discrete`` action space gets a plain categorical. The policy is SB3's ``ActorCriticPolicy``
 over the space of these indices; ``predict()`` returns actions of the original env (the levels, inside
-the ``Box``), so it works like any SB3 policy.
+the ``Box``), so it works like any SB3 policy. (About 300 lines: the policy's constructor arguments, those of SB3's
+``ActorCriticPolicy`` plus the discretization's, are documented for users.)
 """
 
 from __future__ import annotations
