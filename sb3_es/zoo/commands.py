@@ -14,15 +14,7 @@ import warnings
 from collections.abc import Iterator, Sequence
 from pathlib import Path
 
-from sb3_es.zoo.registry import (
-    ALGOS,
-    UsageError,
-    check_algo,
-    config_entry,
-    default_conf_file,
-    is_sb3_es_algo,
-    register,
-)
+from sb3_es.zoo.registry import ALGOS, UsageError, check_algo, config_entry, default_conf_file, is_sb3_es_algo, register
 
 #: rl-zoo's scripts by command, with rl-zoo's own arguments: ``module:function`` is called, a module without a
 #: function (rl-zoo keeps those scripts in the module's ``if __name__ == "__main__"`` block) is run as ``__main__``.
