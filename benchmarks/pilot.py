@@ -8,9 +8,10 @@ Example (the CMA-ES BipedalWalker-v3 pilot of ``docs/benchmarks.md``, one core):
     taskset -c 0 python benchmarks/pilot.py CMAES '{"population_size": 32, "sigma": 0.05, "reward_clip": [-1, 1]}' \\
         --seconds 480 --every 250000 --out results/pilot/cma
 
-Training env: ``make_vec_env(env, n_envs, seed=seed)``; evaluation env: one env seeded ``1000 + seed``. Prints one
-line per evaluation; writes ``<out>_hit.zip`` (at the threshold) or ``<out>_end.zip``. Then check a saved model
-over 100 episodes with ``--check <zip>``.
+Training env: ``make_vec_env(env, n_envs, seed=seed)``; evaluation env: one env seeded ``1000 + seed``. The budget
+is checked at evaluations, so a run ends at the first evaluation past it. Prints one line per evaluation; writes
+``<out>_hit.zip`` at the threshold and ``<out>_end.zip`` when training stops. Then check a saved model over 100
+episodes with ``--check <zip>``.
 """
 
 from __future__ import annotations
@@ -86,9 +87,7 @@ def main() -> None:
     if args.check:
         check(args.algo, args.check, args.env, args.check_episodes)
         return
-    kwargs = json.loads(args.kwargs)
-    if "reward_clip" in kwargs:
-        kwargs["reward_clip"] = tuple(kwargs["reward_clip"])
+    kwargs = json.loads(args.kwargs)  # a JSON list for reward_clip is fine: the algorithm validates it
     env = make_vec_env(args.env, n_envs=args.n_envs, seed=args.seed)
     eval_env = make_vec_env(args.env, n_envs=1, seed=1000 + args.seed)
     model = getattr(sb3_es, args.algo)(args.policy, env, seed=args.seed, **kwargs)
