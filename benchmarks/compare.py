@@ -33,12 +33,15 @@ TensorBoard and appends to the run's ``evaluations.npz``; the training wall-cloc
 time excluded) goes to ``summary.json``. Two evaluations at least per run, so that ``all_plots`` keeps a run that
 stopped early (it drops single-evaluation runs). A budget in steps is passed to ``learn()``, which ends within
 one generation (an sb3-es algorithm) or one rollout (PPO) past it; the steps taken are reported. A wall-clock
-budget stops training through a callback.
+budget stops training through a callback. With ``--stop-at-threshold --confirm-episodes 100`` an evaluation that
+reaches the threshold is confirmed on 100 more episodes (evaluation time), training stops only if they reach it
+too, and the race counts the confirmed time (the confirmed model: ``confirmed_model.zip`` in the run folder).
 
 Output folder layout::
 
     logs/<algo>/<env>_1_seed<s>/          rl-zoo run folder: model, <env>/config.yml, monitor files,
-                                          evaluations.npz, best_model.zip, summary.json (wall-clock, steps taken)
+                                          evaluations.npz, best_model.zip, summary.json (wall-clock, steps taken,
+                                          confirmations), confirmed_model.zip
     tb/<env>/<RUN>_<n>/                   TensorBoard runs side by side (tensorboard --logdir <out>/tb)
     configs/<algo>-<env>.yml              hyperparameters used for rl-zoo3's algorithms
     plots/<env>-wallclock.png             mean return against training wall-clock, band over seeds
@@ -69,6 +72,7 @@ import torch
 import yaml
 from common import hardware, versions
 from stable_baselines3.common.callbacks import EvalCallback
+from stable_baselines3.common.evaluation import evaluate_policy
 from stable_baselines3.common.utils import set_random_seed
 from stable_baselines3.common.vec_env import VecEnv
 
@@ -228,6 +232,9 @@ class RecordingEvalCallback(EvalCallback):
     :param stop_at: Stop training once an evaluation's mean return reaches this value (None: never).
     :param budget_steps: The env-step budget given to ``learn()``: no grid evaluation at or past it (the one at
         the end of training takes its place, after the last generation's update).
+    :param confirm_episodes: With ``stop_at``: an evaluation reaching it is confirmed on this many more episodes
+        (evaluation time, excluded from training time), and training stops only if their mean reaches it too;
+        the confirmed model is saved as ``confirmed_model.zip`` (0: the evaluation alone decides).
     """
 
     def __init__(
@@ -240,6 +247,7 @@ class RecordingEvalCallback(EvalCallback):
         progress: Progress,
         stop_at: float | None = None,
         budget_steps: int | None = None,
+        confirm_episodes: int = 0,
     ) -> None:
         super().__init__(
             eval_env,
@@ -254,6 +262,10 @@ class RecordingEvalCallback(EvalCallback):
         self.budget_steps = budget_steps
         self.budget_seconds = budget_seconds
         self.stop_at = stop_at
+        self.confirm_episodes = max(int(confirm_episodes), 0)
+        #: Confirmations: ``env_steps``, ``wall_s`` (training wall-clock), ``mean_return``, ``std_return``.
+        self.confirmations: list[dict[str, float]] = []
+        self._checked = 0  # evaluations checked against stop_at
         self.progress = progress
         self.next_eval = self.grid
         #: Training wall-clock (s) and total wall-clock (s) of each evaluation, in the order of evaluations.npz.
@@ -293,14 +305,41 @@ class RecordingEvalCallback(EvalCallback):
         self.next_eval = (self.num_timesteps // self.grid + 1) * self.grid if self.grid > 0 else 0
         self._evaluate()
 
+    def _confirm(self) -> bool:
+        """
+        Evaluate the deterministic policy on ``confirm_episodes`` more episodes, as evaluation time.
+
+        :return: Whether their mean reaches ``stop_at``.
+        """
+        assert self.stop_at is not None
+        start = time.perf_counter()
+        returns, _ = evaluate_policy(
+            self.model, self.eval_env, self.confirm_episodes, deterministic=True, return_episode_rewards=True
+        )
+        mean = float(np.mean(returns))
+        if mean >= self.stop_at:
+            self.model.save(Path(self.best_model_save_path or ".") / "confirmed_model")
+        self.eval_seconds += time.perf_counter() - start
+        self.confirmations.append(
+            {
+                "env_steps": self.evaluations_timesteps[-1],
+                "wall_s": round(self.train_seconds(), 3),
+                "mean_return": mean,
+                "std_return": float(np.std(returns)),
+            }
+        )
+        return mean >= self.stop_at
+
     def _on_step(self) -> bool:
         continue_training = self._evaluate() if self._grid_point_due() else True
         train_s = self.train_seconds()
         self.progress.update(self.num_timesteps, train_s, self.last_mean_reward if self.train_s else None)
         if self.budget_seconds is not None and train_s >= self.budget_seconds:
             return False
-        if self.stop_at is not None and self.train_s and self.last_mean_reward >= self.stop_at:
-            return False
+        if self.stop_at is not None and len(self.train_s) > self._checked:  # a new evaluation to check
+            self._checked = len(self.train_s)
+            if self.last_mean_reward >= self.stop_at and (not self.confirm_episodes or self._confirm()):
+                return False
         return continue_training
 
     def _on_training_end(self) -> None:
@@ -338,6 +377,7 @@ def run_one(
     overrides: dict[str, Any] | None = None,
     command: str = "",
     stop_at: float | None = None,
+    confirm_episodes: int = 0,
 ) -> dict[str, Any]:
     """
     Train one (algorithm, env, seed) run through rl-zoo's ExperimentManager and record its evaluations.
@@ -355,6 +395,7 @@ def run_one(
     :param overrides: Hyperparameters replacing the config's (as rl-zoo's ``-params``).
     :param command: Command line of the comparison, for the record.
     :param stop_at: Stop training once an evaluation reaches this mean return (None: run the whole budget).
+    :param confirm_episodes: With ``stop_at``: episodes of the confirmation that must reach it too (0: none).
     :return: The run summary (also written to the run folder's ``summary.json``).
     """
     config, note = config_for(algo, env_id, out)
@@ -400,6 +441,7 @@ def run_one(
         progress=progress,
         stop_at=stop_at,
         budget_steps=total,
+        confirm_episodes=confirm_episodes,
     )
     start = time.perf_counter()
     try:
@@ -432,6 +474,8 @@ def run_one(
         "budget_seconds": seconds,
         "eval_freq": eval_freq,
         "eval_episodes": eval_episodes,
+        "confirm_episodes": recorder.confirm_episodes if stop_at is not None else 0,
+        "confirmations": recorder.confirmations,
         "hyperparams_source": note,
         "config": str(config),
         "hyperparams": {k: str(v) for k, v in hyperparams.items()},
@@ -554,15 +598,18 @@ def _mean_std(values: list[float]) -> str:
 def time_to_threshold(runs: list[dict[str, Any]], threshold: float) -> str:
     """
     The race measure: median over seeds of the training wall-clock at the first evaluation reaching ``threshold``,
-    a seed that never reaches it counting as its whole training time (its budget), with the per-seed times.
+    a seed that never reaches it counting as its whole training time (its budget), with the per-seed times. A run
+    made with ``--confirm-episodes`` counts its first confirmation reaching ``threshold`` instead.
 
     :param runs: The runs of one algorithm on one env.
     :param threshold: Return threshold.
     :return: Table cell, seeds in order, e.g. ``1,959 s median (1,959 / >2,700 / 1,028 s; 2/3 seeds)``.
     """
     per_seed = []  # (seconds, censored) in seed order; censored: never reached, the seconds are its budget
+    confirmed = sorted({int(run.get("confirm_episodes") or 0) for run in runs})
     for run in sorted(runs, key=lambda r: r["seed"]):
-        hit = next((r for r in run["rows"] if r["mean_return"] >= threshold), None)
+        rows = run["confirmations"] if run.get("confirm_episodes") else run["rows"]
+        hit = next((r for r in rows if r["mean_return"] >= threshold), None)
         if hit is None:
             # its wall-clock budget, also when it stopped earlier at its step budget (it never reached the threshold)
             per_seed.append((max(float(run["train_seconds"]), float(run.get("budget_seconds") or 0.0)), True))
@@ -574,7 +621,8 @@ def time_to_threshold(runs: list[dict[str, Any]], threshold: float) -> str:
     middle = order[(len(order) - 1) // 2 : len(order) // 2 + 1]  # one entry (odd count) or two (even)
     prefix = ">" if any(censored for _, censored in middle) else ""  # a budget in the median: a lower bound
     median = float(np.mean([seconds for seconds, _ in middle]))
-    return f"{prefix}{median:,.0f} s median ({cells} s; {reached}/{len(runs)} seeds)"
+    note = f"; confirmed on {' or '.join(map(str, confirmed))} episodes" if confirmed != [0] else ""
+    return f"{prefix}{median:,.0f} s median ({cells} s; {reached}/{len(runs)} seeds{note})"
 
 
 def write_report(out: Path, runs: list[dict[str, Any]], thresholds: dict[str, float], band: str, command: str) -> Path:
@@ -730,6 +778,12 @@ def main(argv: list[str] | None = None) -> Path:
     parser.add_argument(
         "--stop-at-threshold", action="store_true", help="end a run once an evaluation reaches its --threshold"
     )
+    parser.add_argument(
+        "--confirm-episodes",
+        type=int,
+        default=0,
+        help="with --stop-at-threshold: stop only when this many more episodes confirm the threshold (e.g. 100)",
+    )
     parser.add_argument("--skip-existing", action="store_true", help="skip runs that already have a summary.json")
     parser.add_argument("--keep-going", action="store_true", help="record a failed run and go on with the others")
     parser.add_argument("--report-only", action="store_true", help="only redraw plots and table from existing runs")
@@ -758,6 +812,8 @@ def main(argv: list[str] | None = None) -> Path:
     if not args.report_only:
         if args.steps is None and args.seconds is None:
             raise SystemExit("Give a budget: --steps N (env steps), --seconds S (training wall-clock), or both.")
+        if args.confirm_episodes and not args.stop_at_threshold:
+            raise SystemExit("--confirm-episodes confirms --stop-at-threshold's threshold: add it, with --threshold.")
         if args.num_threads > 0:
             torch.set_num_threads(args.num_threads)
         algos = rl_zoo3.ALGOS
@@ -788,6 +844,7 @@ def main(argv: list[str] | None = None) -> Path:
                     overrides=overrides.get(algo),
                     command=command,
                     stop_at=thresholds.get(env_id) if args.stop_at_threshold else None,
+                    confirm_episodes=args.confirm_episodes,
                 )
             except Exception:
                 if not args.keep_going:
@@ -797,9 +854,13 @@ def main(argv: list[str] | None = None) -> Path:
                 (run_dir / "error.txt").write_text(traceback.format_exc())
                 print(f"{label}: FAILED, see {run_dir / 'error.txt'}")
                 continue
+            confirmed = "".join(
+                f", {args.confirm_episodes} episodes at {c['env_steps']:,} steps: {c['mean_return']:.1f}"
+                for c in summary["confirmations"]
+            )
             print(
                 f"{label}: {summary['env_steps']:,} steps in {summary['train_seconds']:,.0f} s, "
-                f"final {summary['final_return']:.1f}, best {summary['best_return']:.1f}"
+                f"final {summary['final_return']:.1f}, best {summary['best_return']:.1f}{confirmed}"
             )
         print(f"{len(plan)} runs in {time.perf_counter() - start:,.0f} s")
         if failures:

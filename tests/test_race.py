@@ -39,3 +39,17 @@ def test_a_median_that_is_a_budget_is_a_lower_bound(time_to_threshold: Any) -> N
     assert time_to_threshold(runs, 300.0) == ">2,400 s median (>2,400 / >2,700 / 900 s; 1/3 seeds)"
     # a run with no wall-clock budget (stopped by hand) counts as the training time it had
     assert time_to_threshold([run(0, [(1500.0, -49.8)], 1500.0, None)], 300.0).startswith(">1,500 s median")
+
+
+def test_a_confirmed_race_counts_the_first_confirmation(time_to_threshold: Any) -> None:
+    # seed 0: the 10-episode hit at 500 s falls short over 100 episodes (291.0); the one at 700 s confirms
+    first = run(0, [(0.0, -90.0), (500.0, 305.0), (700.0, 310.0)], 700.0, 1200.0)
+    first.update(
+        confirm_episodes=100,
+        confirmations=[{"wall_s": 500.0, "mean_return": 291.0}, {"wall_s": 700.0, "mean_return": 301.0}],
+    )
+    # seed 1: hit on 10 episodes, never confirmed: a miss at its budget
+    second = run(1, [(0.0, -90.0), (900.0, 300.5)], 1200.0, 1200.0)
+    second.update(confirm_episodes=100, confirmations=[{"wall_s": 900.0, "mean_return": 280.0}])
+    cell = time_to_threshold([first, second], 300.0)
+    assert cell == ">950 s median (700 / >1,200 s; 1/2 seeds; confirmed on 100 episodes)"

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import importlib.util
+import json
 import os
 import re
 import shutil
@@ -559,6 +560,30 @@ def test_compare_writes_rl_zoos_layout(tmp_path: Path, capsys: pytest.CaptureFix
     figure = tmp_path / "iqm.png"
     zoo("plot_from_file", "-i", f"{pickle}.pkl", "--rliable", "--iqm", "-o", str(figure), "--format", "png")
     assert "Computing bootstrap CI" in capsys.readouterr().out and figure.stat().st_size > 10_000
+
+
+def test_compare_confirms_a_threshold_before_stopping(tmp_path: Path) -> None:
+    compare = load_script("compare")
+    out = tmp_path / "cmp"
+    threads = torch.get_num_threads()
+    try:
+        # any policy scores above -2000 on Pendulum-v1: the start evaluation reaches it, 3 more episodes confirm it
+        compare.main(
+            ["--algos", "ars_es", "--envs", "Pendulum-v1", "--steps", "20000", "--eval-freq", "800", "--out", str(out)]
+            + ["--eval-episodes", "2", "--threshold", "Pendulum-v1=-2000", "--stop-at-threshold"]
+            + ["--confirm-episodes", "3"]
+        )
+    finally:
+        torch.set_num_threads(threads)
+    folder = out / "logs" / "ars_es" / "Pendulum-v1_1_seed0"
+    summary = json.loads((folder / "summary.json").read_text())
+    (confirmation,) = summary["confirmations"]
+    assert summary["confirm_episodes"] == 3 and confirmation["env_steps"] == 0 and confirmation["mean_return"] > -2000
+    assert summary["env_steps"] < 20000 and (folder / "confirmed_model.zip").is_file()
+    text = (out / "results.md").read_text()
+    assert "1/1 seeds; confirmed on 3 episodes" in text
+    with pytest.raises(SystemExit, match="add it, with --threshold"):
+        compare.main(["--algos", "ars_es", "--steps", "10", "--confirm-episodes", "3", "--out", str(out)])
 
 
 @pytest.mark.parametrize("key", [key for key in KEYS if issubclass(ALGOS[key], PopulationAlgorithm)])
