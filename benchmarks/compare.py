@@ -378,6 +378,7 @@ def run_one(
     command: str = "",
     stop_at: float | None = None,
     confirm_episodes: int = 0,
+    eval_envs: int = 1,
 ) -> dict[str, Any]:
     """
     Train one (algorithm, env, seed) run through rl-zoo's ExperimentManager and record its evaluations.
@@ -396,6 +397,7 @@ def run_one(
     :param command: Command line of the comparison, for the record.
     :param stop_at: Stop training once an evaluation reaches this mean return (None: run the whole budget).
     :param confirm_episodes: With ``stop_at``: episodes of the confirmation that must reach it too (0: none).
+    :param eval_envs: Envs the evaluation episodes run on, side by side (one process, batched policy calls).
     :return: The run summary (also written to the run folder's ``summary.json``).
     """
     config, note = config_for(algo, env_id, out)
@@ -433,7 +435,7 @@ def run_one(
     progress = Progress(label, total if steps else None, seconds)
     n_envs = model.get_env().num_envs  # type: ignore[union-attr]
     recorder = RecordingEvalCallback(
-        manager.create_envs(1, eval_env=True),
+        manager.create_envs(eval_envs, eval_env=True),
         eval_freq=eval_freq,
         n_eval_episodes=eval_episodes,
         log_path=str(folder),
@@ -474,6 +476,7 @@ def run_one(
         "budget_seconds": seconds,
         "eval_freq": eval_freq,
         "eval_episodes": eval_episodes,
+        "eval_envs": eval_envs,
         "confirm_episodes": recorder.confirm_episodes if stop_at is not None else 0,
         "confirmations": recorder.confirmations,
         "hyperparams_source": note,
@@ -779,6 +782,12 @@ def main(argv: list[str] | None = None) -> Path:
         "--stop-at-threshold", action="store_true", help="end a run once an evaluation reaches its --threshold"
     )
     parser.add_argument(
+        "--eval-envs",
+        type=int,
+        default=1,
+        help="envs the evaluation episodes run on side by side (faster evaluations of long episodes, e.g. 10)",
+    )
+    parser.add_argument(
         "--confirm-episodes",
         type=int,
         default=0,
@@ -845,6 +854,7 @@ def main(argv: list[str] | None = None) -> Path:
                     command=command,
                     stop_at=thresholds.get(env_id) if args.stop_at_threshold else None,
                     confirm_episodes=args.confirm_episodes,
+                    eval_envs=args.eval_envs,
                 )
             except Exception:
                 if not args.keep_going:

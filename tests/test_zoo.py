@@ -571,13 +571,14 @@ def test_compare_confirms_a_threshold_before_stopping(tmp_path: Path) -> None:
         compare.main(
             ["--algos", "ars_es", "--envs", "Pendulum-v1", "--steps", "20000", "--eval-freq", "800", "--out", str(out)]
             + ["--eval-episodes", "2", "--threshold", "Pendulum-v1=-2000", "--stop-at-threshold"]
-            + ["--confirm-episodes", "3"]
+            + ["--confirm-episodes", "3", "--eval-envs", "2"]
         )
     finally:
         torch.set_num_threads(threads)
     folder = out / "logs" / "ars_es" / "Pendulum-v1_1_seed0"
     summary = json.loads((folder / "summary.json").read_text())
     (confirmation,) = summary["confirmations"]
+    assert summary["eval_envs"] == 2 and np.load(folder / "evaluations.npz")["results"].shape == (2, 2)  # start and end
     assert summary["confirm_episodes"] == 3 and confirmation["env_steps"] == 0 and confirmation["mean_return"] > -2000
     assert summary["env_steps"] < 20000 and (folder / "confirmed_model.zip").is_file()
     text = (out / "results.md").read_text()
