@@ -23,6 +23,19 @@ from stable_baselines3.common.utils import get_system_info
 
 import sb3_es
 
+#: Reward thresholds of the ARS paper (Mania et al. 2018, Table 1: the levels its MuJoCo tasks are counted as
+#: solved at), used for the ``-v5`` tasks, and the seed document's levels for dm_control walker-walk (a linear policy
+#: near 500, an MLP with layer normalization near 700; the stricter one here).
+PAPER_THRESHOLDS = {
+    "Swimmer-v5": 325.0,
+    "Hopper-v5": 3120.0,
+    "HalfCheetah-v5": 3430.0,
+    "Walker2d-v5": 4390.0,
+    "Ant-v5": 3580.0,
+    "Humanoid-v5": 6000.0,
+    "dm_control/walker-walk-v0": 500.0,
+}
+
 #: The entries of SB3's ``get_system_info()`` that :func:`versions` reports, in this order.
 SB3_VERSIONS = ("Python", "Stable-Baselines3", "PyTorch", "Numpy", "Gymnasium")
 

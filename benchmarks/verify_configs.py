@@ -31,6 +31,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 import yaml
+from common import PAPER_THRESHOLDS
 
 import sb3_es
 from sb3_es.zoo import default_conf_file, sb3_es_algos
@@ -45,10 +46,12 @@ THRESHOLDS = {
     "LunarLander-v3": 200.0,
     "LunarLanderContinuous-v3": 200.0,
     "BipedalWalker-v3": 300.0,
+    **PAPER_THRESHOLDS,  # the MuJoCo tasks: the ARS paper's levels, below Gymnasium's where it has one
 }
 
 #: Env steps between evaluations, by env (default :data:`DEFAULT_EVAL_FREQ`).
 EVAL_FREQ = {"CartPole-v1": 5_000, "LunarLander-v3": 50_000, "LunarLanderContinuous-v3": 50_000}
+EVAL_FREQ.update(dict.fromkeys(PAPER_THRESHOLDS, 100_000))  # 1,000-step episodes, millions of steps
 DEFAULT_EVAL_FREQ = 20_000
 
 
@@ -118,6 +121,8 @@ def run_entry(
         str(EVAL_FREQ.get(env_id, DEFAULT_EVAL_FREQ)),
         "--eval-episodes",
         str(args.eval_episodes),
+        "--eval-envs",
+        str(args.eval_envs),
         "--out",
         str(entry_folder(args, algo, env_id)),
         "--skip-existing",
@@ -218,6 +223,7 @@ def main(argv: list[str] | None = None) -> str:
     parser.add_argument("--max-steps", type=int, default=None, help="cap on the entry's n_timesteps")
     parser.add_argument("--max-seconds", type=float, default=None, help="training wall-clock cap per run")
     parser.add_argument("--eval-episodes", type=int, default=10)
+    parser.add_argument("--eval-envs", type=int, default=1, help="envs the evaluation episodes run on side by side")
     parser.add_argument("--threshold", nargs="*", default=[], help="ENV_ID=RETURN, replacing the defaults")
     parser.add_argument("--out", default="results/verify", help="output folder (one compare.py folder per entry)")
     parser.add_argument("--tag", default="", help="suffix of the entries' output folders (a re-run after a fix)")
