@@ -51,7 +51,8 @@ THRESHOLDS = {
 
 #: Env steps between evaluations, by env (default :data:`DEFAULT_EVAL_FREQ`).
 EVAL_FREQ = {"CartPole-v1": 5_000, "LunarLander-v3": 50_000, "LunarLanderContinuous-v3": 50_000}
-EVAL_FREQ.update(dict.fromkeys(PAPER_THRESHOLDS, 100_000))  # 1,000-step episodes, millions of steps
+# 1,000-step episodes, millions of steps
+EVAL_FREQ.update(dict.fromkeys([*PAPER_THRESHOLDS, "dm_control/cheetah-run-v0"], 100_000))
 DEFAULT_EVAL_FREQ = 20_000
 
 
