@@ -14,7 +14,7 @@ help:
 	@echo "make lint       ruff check + ruff format --check"
 	@echo "make typecheck  mypy"
 	@echo "make docs       build the Sphinx docs into docs/_build/html"
-	@echo "make bench      run benchmarks/run_all.py"
+	@echo "make bench      throughput ratios (benchmarks/throughput.py, about 5 min; BENCH_ARGS=--quick)"
 	@echo "make conformance  run the pinned stable-baselines3 / sb3-contrib test files on sb3-es (downloads them)"
 	@echo "make clean      remove build outputs and caches (keeps .venv)"
 
@@ -45,12 +45,10 @@ typecheck: venv
 docs: venv
 	$(BIN)/sphinx-build -W --keep-going -b html docs docs/_build/html
 
+# Throughput ratios against sb3-contrib's ARS and the plain step loop, measured in one run (about 5 minutes).
+# The learning benchmarks (hours) are separate commands: docs/benchmarks.md.
 bench: venv
-	@if [ -f benchmarks/run_all.py ]; then \
-		$(BIN)/python benchmarks/run_all.py; \
-	else \
-		echo "benchmarks/run_all.py does not exist yet"; \
-	fi
+	$(BIN)/python benchmarks/throughput.py $(BENCH_ARGS)
 
 # Downloads the pinned SB3 and sb3-contrib source distributions from PyPI at run time (their tests are never
 # committed) and runs them with sb3-es's classes substituted (tests/conformance/). Not part of `make test`.
