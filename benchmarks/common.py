@@ -12,6 +12,7 @@ import contextlib
 import multiprocessing as mp
 import os
 import platform
+import subprocess
 import time
 from dataclasses import dataclass
 from importlib import metadata
@@ -52,6 +53,23 @@ def cpu_model() -> str:
 def hardware() -> str:
     """:return: One line: CPU model, logical CPUs, operating system."""
     return f"{cpu_model()}, {os.cpu_count()} logical CPUs, {platform.system()} {platform.release()}"
+
+
+def source_commit() -> str | None:
+    """
+    :return: The git commit of the imported ``sb3_es`` source (short hash, ``+changes`` if ``sb3_es/`` has
+        uncommitted changes), or None outside a git checkout.
+    """
+    root = Path(sb3_es.__file__).resolve().parents[1]
+
+    def git(*args: str) -> str:
+        return subprocess.run(["git", "-C", str(root), *args], capture_output=True, text=True, check=True).stdout
+
+    try:
+        head, changes = git("rev-parse", "--short", "HEAD").strip(), git("status", "--porcelain", "sb3_es").strip()
+    except (OSError, subprocess.CalledProcessError):
+        return None
+    return head + ("+changes" if changes else "")
 
 
 def versions(*packages: str) -> str:

@@ -70,7 +70,7 @@ import gymnasium as gym
 import numpy as np
 import torch
 import yaml
-from common import hardware, versions
+from common import hardware, source_commit, versions
 from stable_baselines3.common.callbacks import EvalCallback
 from stable_baselines3.common.evaluation import evaluate_policy
 from stable_baselines3.common.utils import set_random_seed
@@ -487,6 +487,7 @@ def run_one(
         "command": command,
         "date": time.strftime("%Y-%m-%d %H:%M %Z"),
         "hardware": hardware(),
+        "commit": source_commit(),
     }
     (folder / "summary.json").write_text(json.dumps(summary, indent=2))
     return summary

@@ -25,6 +25,7 @@ import os
 import shlex
 import subprocess
 import sys
+import textwrap
 from pathlib import Path
 from typing import Any
 
@@ -168,6 +169,9 @@ def seed_results(folder: Path, threshold: float | None) -> list[dict[str, Any]]:
                 "budget_seconds": summary["budget_seconds"],
                 "command": summary["command"],
                 "date": summary["date"],
+                "commit": summary.get("commit"),
+                "eval_freq": summary["eval_freq"],
+                "eval_envs": summary["eval_envs"],
                 "hardware": summary["hardware"],
             }
         )
@@ -185,8 +189,9 @@ def table(rows: list[tuple[str, str, float | None, list[dict[str, Any]]]]) -> st
         "|---|---|---|---|---|---|---|---|---|",
     ]
     for algo, env_id, threshold, results in rows:
+        shown = "none" if threshold is None else f"{threshold:g}"
         if not results:
-            lines.append(f"| {algo} | {env_id} | {threshold:g} | | | | not run | | |")
+            lines.append(f"| {algo} | {env_id} | {shown} | | | | not run | | |")
             continue
         budget = f"{results[0]['budget_steps']:,} steps"
         if results[0]["budget_seconds"]:
@@ -204,10 +209,56 @@ def table(rows: list[tuple[str, str, float | None, list[dict[str, Any]]]]) -> st
         seeds = ", ".join(str(r["seed"]) for r in results)
         start = ", ".join(f"{r['first']:.1f}" for r in results)
         lines.append(
-            f"| {algo} | {env_id} | {threshold:g} | {seeds} | {budget} | {start} | {'; '.join(outcome)} | {seconds} "
+            f"| {algo} | {env_id} | {shown} | {seeds} | {budget} | {start} | {'; '.join(outcome)} | {seconds} "
             f"| {reached}/{len(results)} |"
         )
     return "\n".join(lines)
+
+
+def comment(algo: str, env_id: str, threshold: float | None, results: list[dict[str, Any]], n_timesteps: int) -> str:
+    """
+    The YAML comment lines that state an entry's measured result and the command that reproduces it.
+
+    :param results: The entry's seed results (:func:`seed_results`).
+    :param n_timesteps: The entry's ``n_timesteps``.
+    :return: ``# ``-prefixed lines.
+    """
+    first = results[0]
+    commits = sorted({r["commit"] or "commit not recorded" for r in results})
+    budget = f"at most {first['budget_steps']:,} steps"
+    if first["budget_seconds"]:
+        budget += f" or {first['budget_seconds']:g} s of training"
+    outcomes = []
+    for r in results:
+        if r["hit_steps"] is not None:
+            outcomes.append(
+                f"seed {r['seed']} reached {threshold:g} at {r['hit_steps']:,} steps ({r['hit_seconds']:.0f} s)"
+            )
+        else:
+            outcomes.append(
+                f"seed {r['seed']} went from {r['first']:.1f} to best {r['best']:.1f}, final {r['final']:.1f} "
+                f"({r['steps']:,} steps, {r['seconds']:.0f} s)"
+            )
+    reached = (
+        ""
+        if threshold is None
+        else f"; {threshold:g} reached by {sum(r['hit_steps'] is not None for r in results)} of {len(results)}"
+    )
+    command = f"python benchmarks/verify_configs.py --algos {algo} --envs {env_id} --seeds " + " ".join(
+        str(r["seed"]) for r in results
+    )
+    if first["budget_seconds"]:
+        command += f" --max-seconds {first['budget_seconds']:g}"
+    if first["budget_steps"] < n_timesteps:
+        command += f" --max-steps {first['budget_steps']}"
+    if first["eval_envs"] != 1:
+        command += f" --eval-envs {first['eval_envs']}"
+    text = (
+        f"Measured {first['date'][:10]} ({', '.join(commits)}; {budget}; 10 evaluation episodes every "
+        f"{first['eval_freq']:,} steps): {'; '.join(outcomes)}{reached}."
+    )
+    lines = ["# " + line for line in textwrap.wrap(text, 118)]
+    return "\n".join([*lines, "# Command:", f"#   {command}"])
 
 
 def main(argv: list[str] | None = None) -> str:
@@ -229,6 +280,9 @@ def main(argv: list[str] | None = None) -> str:
     parser.add_argument("--out", default="results/verify", help="output folder (one compare.py folder per entry)")
     parser.add_argument("--tag", default="", help="suffix of the entries' output folders (a re-run after a fix)")
     parser.add_argument("--table-only", action="store_true", help="only print the table from existing runs")
+    parser.add_argument(
+        "--comments", action="store_true", help="with --table-only: also print each entry's YAML comment lines"
+    )
     args = parser.parse_args(argv)
     given = {}
     for item in args.threshold:
@@ -239,13 +293,18 @@ def main(argv: list[str] | None = None) -> str:
     selected = entries(args.algos, args.envs)
     if not selected:
         raise SystemExit(f"No entry for {args.envs} in the packaged files of {args.algos}.")
-    rows = []
+    rows, comments = [], []
     for algo, env_id, entry in selected:
         threshold = threshold_for(env_id, given)
         if not args.table_only:
             run_entry(algo, env_id, entry, args, threshold)
-        rows.append((algo, env_id, threshold, seed_results(entry_folder(args, algo, env_id), threshold)))
-    text = table(rows)
+        results = seed_results(entry_folder(args, algo, env_id), threshold)
+        rows.append((algo, env_id, threshold, results))
+        if args.comments and results:
+            comments.append(
+                f"{algo} {env_id}:\n" + comment(algo, env_id, threshold, results, int(float(entry["n_timesteps"])))
+            )
+    text = "\n\n".join([table(rows), *comments])
     print(text)
     return text
 

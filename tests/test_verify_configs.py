@@ -1,0 +1,50 @@
+"""The YAML comment ``benchmarks/verify_configs.py --comments`` writes for an entry: its figures and its command."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from test_zoo import load_script
+
+
+def result(seed: int, hit: int | None, commit: str | None = "abc1234") -> dict[str, Any]:
+    """One seed's result as ``seed_results`` gives it."""
+    return {
+        "seed": seed,
+        "steps": 1_200_000,
+        "seconds": 150.0,
+        "first": -100.0,
+        "final": 250.5,
+        "best": 260.25,
+        "hit_steps": hit,
+        "hit_seconds": None if hit is None else 42.0,
+        "budget_steps": 2_000_000,
+        "budget_seconds": 150.0,
+        "date": "2026-11-25 01:33 UTC",
+        "commit": commit,
+        "eval_freq": 100_000,
+        "eval_envs": 5,
+    }
+
+
+def test_comment_states_each_seed_and_the_command() -> None:
+    comment = load_script("verify_configs").comment
+    text = comment("ars_es", "Hopper-v5", 300.0, [result(0, 800_000), result(1, None)], n_timesteps=7_000_000)
+    lines = text.splitlines()
+    assert all(line.startswith("#") for line in lines)
+    assert all(len(line) <= 120 for line in lines[:-1])  # the command is one line, however long
+    joined = " ".join(line.lstrip("# ") for line in lines)
+    assert "Measured 2026-11-25 (abc1234;" in joined
+    assert "seed 0 reached 300 at 800,000 steps (42 s)" in joined
+    assert "seed 1 went from -100.0 to best 260.2, final 250.5 (1,200,000 steps, 150 s)" in joined
+    assert "300 reached by 1 of 2" in joined
+    command = "python benchmarks/verify_configs.py --algos ars_es --envs Hopper-v5 --seeds 0 1 --max-seconds 150"
+    # the budget below the entry's n_timesteps is part of the command that reproduces the figures
+    assert lines[-1] == f"#   {command} --max-steps 2000000 --eval-envs 5"
+
+
+def test_comment_without_threshold_or_commit() -> None:
+    comment = load_script("verify_configs").comment
+    text = comment("cmaes", "dm_control/cheetah-run-v0", None, [result(0, None, commit=None)], n_timesteps=2_000_000)
+    assert "commit not recorded" in text and "reached by" not in text
+    assert text.splitlines()[-1].endswith("--seeds 0 --max-seconds 150 --eval-envs 5")
