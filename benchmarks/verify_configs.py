@@ -31,6 +31,7 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
+import shimmy
 import yaml
 from common import PAPER_THRESHOLDS
 
@@ -55,6 +56,8 @@ EVAL_FREQ = {"CartPole-v1": 5_000, "LunarLander-v3": 50_000, "LunarLanderContinu
 # 1,000-step episodes, millions of steps
 EVAL_FREQ.update(dict.fromkeys([*PAPER_THRESHOLDS, "dm_control/cheetah-run-v0"], 100_000))
 DEFAULT_EVAL_FREQ = 20_000
+
+gym.register_envs(shimmy)  # the dm_control/ ids, for their spec thresholds
 
 
 def threshold_for(env_id: str, given: dict[str, float]) -> float | None:

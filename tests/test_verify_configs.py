@@ -48,3 +48,10 @@ def test_comment_without_threshold_or_commit() -> None:
     text = comment("cmaes", "dm_control/cheetah-run-v0", None, [result(0, None, commit=None)], n_timesteps=2_000_000)
     assert "commit not recorded" in text and "reached by" not in text
     assert text.splitlines()[-1].endswith("--seeds 0 --max-seconds 150 --eval-envs 5")
+
+
+def test_threshold_of_a_dm_control_env_without_one_is_none() -> None:
+    """dm_control ids are registered (by shimmy) before their spec is read; cheetah-run has no threshold."""
+    threshold_for = load_script("verify_configs").threshold_for
+    assert threshold_for("dm_control/cheetah-run-v0", {}) is None
+    assert threshold_for("dm_control/cheetah-run-v0", {"dm_control/cheetah-run-v0": 700.0}) == 700.0
