@@ -6,6 +6,7 @@ in ``test_sharded.py``."""
 
 from __future__ import annotations
 
+import functools
 import gc
 import os
 import signal
@@ -14,6 +15,7 @@ import sys
 import time
 from pathlib import Path
 
+import gymnasium as gym
 import numpy as np
 import pytest
 from envs import ToyEnv
@@ -21,7 +23,7 @@ from gymnasium.wrappers import ClipReward
 from sb3_contrib.common.wrappers import TimeFeatureWrapper
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.monitor import load_results
-from stable_baselines3.common.vec_env import SubprocVecEnv, VecNormalize
+from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNormalize
 
 from sb3_es import ARS
 from sb3_es.common.policies import MlpPolicy
@@ -160,6 +162,31 @@ def test_evaluator_processes_from_a_vec_env(monkeypatch: pytest.MonkeyPatch, tmp
         ARS("LinearPolicy", make_vec_env("Pendulum-v1", wrapper_class=TimeFeatureWrapper), evaluator="processes")
     with pytest.raises(ValueError, match="not built by gym.make"):
         ARS("LinearPolicy", ToyEnv(), evaluator="processes")
+
+
+def _pendulum(g: float) -> gym.Env:
+    return gym.make("Pendulum-v1", g=g)
+
+
+def test_evaluator_processes_from_envs_registered_with_a_partial() -> None:
+    """
+    Envs registered with a ``functools.partial`` entry point (as shimmy registers ``dm_control/...``) are rebuilt in
+    the workers: ``gym.make`` copies the partial into each env's spec, and the copies are still the same env. Envs
+    that really differ are refused, and the message names the env id to give instead.
+    """
+    gym.register("PartialPendulum-v0", entry_point=functools.partial(_pendulum, g=9.0), max_episode_steps=200)
+    try:
+        model = ARS("LinearPolicy", make_vec_env("PartialPendulum-v0", n_envs=2), n_delta=2, evaluator="processes")
+        try:
+            model.learn(1)
+        finally:
+            model._evaluator.close()  # type: ignore[union-attr]
+        assert model._n_updates == 1 and model.num_timesteps == 4 * 200
+        differ = DummyVecEnv([lambda: gym.make("Pendulum-v1", g=9.0), lambda: gym.make("Pendulum-v1", g=10.0)])
+        with pytest.raises(ValueError, match=r"envs differ.*give the env id instead \(env='Pendulum-v1'\)"):
+            ARS("LinearPolicy", differ, evaluator="processes")
+    finally:
+        del gym.registry["PartialPendulum-v0"]
 
 
 def test_models_in_a_loop() -> None:

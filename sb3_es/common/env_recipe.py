@@ -30,6 +30,22 @@ def _apply_wrappers(env: gym.Env, wrappers: tuple[WrapperSpec, ...]) -> gym.Env:
     return env
 
 
+def _same_spec(spec: EnvSpec, other: EnvSpec) -> bool:
+    """
+    Whether two envs' specs describe the same env.
+
+    ``gym.make`` copies the spec into each env, and a copied ``functools.partial`` entry point (shimmy registers
+    ``dm_control/...`` that way) never equals the original: entry points given as partials are compared by their
+    function and arguments instead.
+    """
+    entry, other_entry = spec.entry_point, other.entry_point
+    if isinstance(entry, functools.partial) and isinstance(other_entry, functools.partial):
+        if (entry.func, entry.args, entry.keywords) != (other_entry.func, other_entry.args, other_entry.keywords):
+            return False
+        other = dataclasses.replace(other, entry_point=entry)
+    return spec == other
+
+
 def env_recipe(env: VecEnv, evaluator: str) -> tuple[functools.partial[gym.Env], WorkerEnvArgs]:
     """
     The env factory and ``make_vec_env`` arguments with which a worker builds envs like those of ``env``.
@@ -39,8 +55,11 @@ def env_recipe(env: VecEnv, evaluator: str) -> tuple[functools.partial[gym.Env],
     :return: A picklable factory (``gym.make`` of the spec, with the wrappers inside ``Monitor``) and the worker
         env arguments (``wrapper_class`` for the wrappers outside ``Monitor``).
     """
+    specs: list[EnvSpec | None] = env.get_attr("spec")
+    spec = specs[0]
+    env_id = spec.id if spec is not None else "<env id>"
     fix = (
-        f"give the env id instead (env='BipedalWalker-v3'), or pass evaluator=ProcessEvaluator(env_factory) / "
+        f"give the env id instead (env={env_id!r}), or pass evaluator=ProcessEvaluator(env_factory) / "
         f"RayEvaluator(env_factory) built with a factory for your envs (evaluator={evaluator!r} builds every "
         f"worker's envs itself)"
     )
@@ -49,11 +68,9 @@ def env_recipe(env: VecEnv, evaluator: str) -> tuple[functools.partial[gym.Env],
             f"evaluator={evaluator!r}: the env is wrapped in {type(env).__name__}, which the workers cannot apply "
             f"to their own envs: remove the VecEnv wrapper (the policies normalize observations themselves), or {fix}."
         )
-    specs: list[EnvSpec | None] = env.get_attr("spec")
-    spec = specs[0]
     if spec is None:
         raise ValueError(f"evaluator={evaluator!r}: the env was not built by gym.make (it has no spec): {fix}.")
-    if any(other != spec for other in specs[1:]):
+    if any(other is None or not _same_spec(spec, other) for other in specs[1:]):
         raise ValueError(f"evaluator={evaluator!r}: the VecEnv's envs differ (their specs are not equal): {fix}.")
     wrappers = tuple(spec.additional_wrappers)
     names = [wrapper.entry_point for wrapper in wrappers]
