@@ -81,7 +81,6 @@ REMOVED = {
     "simple_es": ("Pendulum-v1",),
     "reinforce": (
         "Pendulum-v1",
-        "LunarLanderContinuous-v3",
         "Swimmer-v5",
         "Hopper-v5",
         "HalfCheetah-v5",
