@@ -9,6 +9,7 @@ The scripts import it as ``from common import ...`` (Python puts a script's own 
 from __future__ import annotations
 
 import contextlib
+import math
 import multiprocessing as mp
 import os
 import platform
@@ -20,6 +21,7 @@ from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
+import yaml
 from stable_baselines3.common.utils import get_system_info
 
 import sb3_es
@@ -39,6 +41,23 @@ PAPER_THRESHOLDS = {
 
 #: The entries of SB3's ``get_system_info()`` that :func:`versions` reports, in this order.
 SB3_VERSIONS = ("Python", "Stable-Baselines3", "PyTorch", "Numpy", "Gymnasium")
+
+
+def read_value(text: str) -> Any:
+    """
+    Read a command-line value as YAML (numbers, booleans, lists, ``lin_0.01``, ``"dict(...)"``), and numbers in
+    exponent form such as ``5e7`` or ``1e-3`` as floats (YAML 1.1 reads them as strings, which rl-zoo then rejects).
+
+    :param text: The value as typed.
+    :return: The value.
+    """
+    value = yaml.safe_load(text)
+    if isinstance(value, str):
+        with contextlib.suppress(ValueError):
+            number = float(value)
+            if math.isfinite(number):
+                return number
+    return value
 
 
 def cpu_model() -> str:

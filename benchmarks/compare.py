@@ -70,7 +70,7 @@ import gymnasium as gym
 import numpy as np
 import torch
 import yaml
-from common import hardware, source_commit, versions
+from common import hardware, read_value, source_commit, versions
 from stable_baselines3.common.callbacks import EvalCallback
 from stable_baselines3.common.evaluation import evaluate_policy
 from stable_baselines3.common.utils import set_random_seed
@@ -741,7 +741,7 @@ def parse_overrides(items: list[str]) -> dict[str, dict[str, Any]]:
         algo, colon, key = target.partition(":")
         if not sep or not colon or not algo or not key:
             raise SystemExit(f"--override {item!r}: use ALGO:KEY=VALUE, e.g. ppo:n_steps=256")
-        overrides[algo][key] = yaml.safe_load(value)
+        overrides[algo][key] = read_value(value)
     return dict(overrides)
 
 

@@ -21,8 +21,7 @@ from typing import Any
 
 import numpy as np
 import torch
-import yaml
-from common import system_info
+from common import read_value, system_info
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.evaluation import evaluate_policy
 
@@ -74,7 +73,7 @@ def main() -> None:
     parser.add_argument("--out", default="results/headline")
     args = parser.parse_args()
     torch.set_num_threads(1)
-    kwargs = {key: yaml.safe_load(value) for key, value in (item.split("=", 1) for item in args.set)}
+    kwargs = {key: read_value(value) for key, value in (item.split("=", 1) for item in args.set)}
     budgets = sorted(int(b) for b in args.steps)
     rows = [
         row

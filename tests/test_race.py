@@ -53,3 +53,22 @@ def test_a_confirmed_race_counts_the_first_confirmation(time_to_threshold: Any) 
     second.update(confirm_episodes=100, confirmations=[{"wall_s": 900.0, "mean_return": 280.0}])
     cell = time_to_threshold([first, second], 300.0)
     assert cell == ">950 s median (700 / >1,200 s; 1/2 seeds; confirmed on 100 episodes)"
+
+
+def test_overrides_read_yaml_values_and_exponent_numbers() -> None:
+    parse_overrides = load_script("compare").parse_overrides
+    overrides = parse_overrides(
+        ["pgpe:n_timesteps=5e7", "pgpe:stdev_init=0.05", "ars_es:learning_rate=1e-3", "ars_es:policy=MlpPolicy"]
+        + ["ars_es:reward_clip=[-1, 1]", "ars_es:zero_policy=false", "ppo:learning_rate=lin_3e-4"]
+    )
+    # YAML 1.1 reads 5e7 and 1e-3 as strings, which rl-zoo's int(n_timesteps) would reject
+    assert overrides["pgpe"] == {"n_timesteps": 5e7, "stdev_init": 0.05}
+    assert overrides["ars_es"] == {
+        "learning_rate": 1e-3,
+        "policy": "MlpPolicy",
+        "reward_clip": [-1, 1],
+        "zero_policy": False,
+    }
+    assert overrides["ppo"] == {"learning_rate": "lin_3e-4"}
+    with pytest.raises(SystemExit, match="use ALGO:KEY=VALUE"):
+        parse_overrides(["n_timesteps=5e7"])
