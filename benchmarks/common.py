@@ -9,7 +9,6 @@ The scripts import it as ``from common import ...`` (Python puts a script's own 
 from __future__ import annotations
 
 import contextlib
-import math
 import multiprocessing as mp
 import os
 import platform
@@ -54,9 +53,7 @@ def read_value(text: str) -> Any:
     value = yaml.safe_load(text)
     if isinstance(value, str):
         with contextlib.suppress(ValueError):
-            number = float(value)
-            if math.isfinite(number):
-                return number
+            return float(value)
     return value
 
 

@@ -1,4 +1,7 @@
-"""The race measure of ``benchmarks/compare.py``: median time to a threshold, a missing seed counting as its budget."""
+"""
+``benchmarks/compare.py``'s own logic: the race measure (median time to a threshold, a missing seed counting as its
+budget) and the reading of ``--override`` values.
+"""
 
 from __future__ import annotations
 
