@@ -36,12 +36,14 @@ one generation (an sb3-es algorithm) or one rollout (PPO) past it; the steps tak
 budget stops training through a callback. With ``--stop-at-threshold --confirm-episodes 100`` an evaluation that
 reaches the threshold is confirmed on 100 more episodes (evaluation time), training stops only if they reach it
 too, and the race counts the confirmed time (the confirmed model: ``confirmed_model.zip`` in the run folder).
+Each evaluation also saves the model as ``last_model.zip``; ``--continue-from <run>/last_model.zip --out <other>``
+trains it on (one algorithm, env and seed; its step count goes on, the new run's wall-clock starts at 0).
 
 Output folder layout::
 
     logs/<algo>/<env>_1_seed<s>/          rl-zoo run folder: model, <env>/config.yml, monitor files,
-                                          evaluations.npz, best_model.zip, summary.json (wall-clock, steps taken,
-                                          confirmations), confirmed_model.zip
+                                          evaluations.npz, best_model.zip, last_model.zip, summary.json
+                                          (wall-clock, steps taken, confirmations), confirmed_model.zip
     tb/<env>/<RUN>_<n>/                   TensorBoard runs side by side (tensorboard --logdir <out>/tb)
     configs/<algo>-<env>.yml              hyperparameters used for rl-zoo3's algorithms
     plots/<env>-wallclock.png             mean return against training wall-clock, band over seeds
@@ -235,6 +237,9 @@ class RecordingEvalCallback(EvalCallback):
     :param confirm_episodes: With ``stop_at``: an evaluation reaching it is confirmed on this many more episodes
         (evaluation time, excluded from training time), and training stops only if their mean reaches it too;
         the confirmed model is saved as ``confirmed_model.zip`` (0: the evaluation alone decides).
+
+    After every evaluation the model is saved as ``last_model.zip`` in ``log_path`` (strategy state included, in
+    evaluation time): the checkpoint that ``--continue-from`` trains on from.
     """
 
     def __init__(
@@ -293,6 +298,7 @@ class RecordingEvalCallback(EvalCallback):
     def _evaluate(self) -> bool:
         start = time.perf_counter()
         continue_training = super()._on_step()  # eval_freq=1: evaluates now
+        self.model.save(Path(self.best_model_save_path or ".") / "last_model")
         self.eval_seconds += time.perf_counter() - start
         self.train_s.append(round(self.train_seconds(), 3))
         self.total_s.append(round(time.perf_counter() - self._start, 3))
@@ -379,6 +385,7 @@ def run_one(
     stop_at: float | None = None,
     confirm_episodes: int = 0,
     eval_envs: int = 1,
+    continue_from: Path | None = None,
 ) -> dict[str, Any]:
     """
     Train one (algorithm, env, seed) run through rl-zoo's ExperimentManager and record its evaluations.
@@ -398,10 +405,22 @@ def run_one(
     :param stop_at: Stop training once an evaluation reaches this mean return (None: run the whole budget).
     :param confirm_episodes: With ``stop_at``: episodes of the confirmation that must reach it too (0: none).
     :param eval_envs: Envs the evaluation episodes run on, side by side (one process, batched policy calls).
+    :param continue_from: A saved model (e.g. a run's ``last_model.zip``) to train on from, loaded by rl-zoo's
+        ``--trained-agent`` with the overrides applied: its step count goes on, so evaluations keep the grid and the
+        budget in steps counts from there; the wall-clock columns count this run only.
     :return: The run summary (also written to the run folder's ``summary.json``).
     """
     config, note = config_for(algo, env_id, out)
     folder = run_folder(out, algo, env_id, seed)
+    if continue_from is not None:
+        continue_from = continue_from.resolve()
+        if not continue_from.is_file() or continue_from.suffix != ".zip":
+            raise ValueError(f"--continue-from {continue_from}: no such model; give a saved model's .zip file.")
+        if continue_from.is_relative_to(folder.resolve()):
+            raise ValueError(
+                f"--continue-from {continue_from} lies in the run folder {folder}, which the new run replaces: "
+                "give another --out, or copy the model elsewhere first."
+            )
     if folder.exists():  # a new run of the same (algorithm, env, seed) replaces the old one
         shutil.rmtree(folder)
     args = argparse.Namespace(
@@ -421,6 +440,7 @@ def run_one(
         config=str(config),
         hyperparams=dict(overrides) if overrides else None,
         uuid_str=f"_seed{seed}",
+        trained_agent=str(continue_from or ""),
     )
     assert Path(manager.save_path) == folder, (manager.save_path, folder)
     if overrides:
@@ -432,7 +452,8 @@ def run_one(
     (folder / "setup.txt").write_text(setup_log.getvalue())
     model, hyperparams = result
     total = manager.n_timesteps
-    progress = Progress(label, total if steps else None, seconds)
+    offset = model.num_timesteps if continue_from is not None else 0
+    progress = Progress(label, offset + total if steps else None, seconds)
     n_envs = model.get_env().num_envs  # type: ignore[union-attr]
     recorder = RecordingEvalCallback(
         manager.create_envs(eval_envs, eval_env=True),
@@ -442,12 +463,12 @@ def run_one(
         budget_seconds=seconds,
         progress=progress,
         stop_at=stop_at,
-        budget_steps=total,
+        budget_steps=offset + total,
         confirm_episodes=confirm_episodes,
     )
     start = time.perf_counter()
     try:
-        model.learn(total, callback=[*manager.callbacks, recorder])
+        model.learn(total, callback=[*manager.callbacks, recorder], reset_num_timesteps=continue_from is None)
     finally:
         progress.close()
     total_s = time.perf_counter() - start
@@ -477,6 +498,7 @@ def run_one(
         "eval_freq": eval_freq,
         "eval_episodes": eval_episodes,
         "eval_envs": eval_envs,
+        "continued_from": {"model": str(continue_from), "env_steps": offset} if continue_from is not None else None,
         "confirm_episodes": recorder.confirm_episodes if stop_at is not None else 0,
         "confirmations": recorder.confirmations,
         "hyperparams_source": note,
@@ -794,6 +816,12 @@ def main(argv: list[str] | None = None) -> Path:
         default=0,
         help="with --stop-at-threshold: stop only when this many more episodes confirm the threshold (e.g. 100)",
     )
+    parser.add_argument(
+        "--continue-from",
+        type=Path,
+        default=None,
+        help="a saved model (e.g. a run's last_model.zip) to train on from; one algorithm, env and seed only",
+    )
     parser.add_argument("--skip-existing", action="store_true", help="skip runs that already have a summary.json")
     parser.add_argument("--keep-going", action="store_true", help="record a failed run and go on with the others")
     parser.add_argument("--report-only", action="store_true", help="only redraw plots and table from existing runs")
@@ -831,6 +859,10 @@ def main(argv: list[str] | None = None) -> Path:
         if missing:
             print(f"Skipping unknown or unavailable algorithms: {missing} (known: {sorted(algos)})")
         plan = [(e, a, s) for e in args.envs for a in args.algos if a in algos for s in args.seeds]
+        if args.continue_from is not None and len(plan) != 1:
+            raise SystemExit(
+                f"--continue-from trains one model on: give one algorithm, env and seed (the plan has {len(plan)})."
+            )
         start = time.perf_counter()
         failures: list[str] = []
         for i, (env_id, algo, seed) in enumerate(plan, 1):
@@ -856,6 +888,7 @@ def main(argv: list[str] | None = None) -> Path:
                     stop_at=thresholds.get(env_id) if args.stop_at_threshold else None,
                     confirm_episodes=args.confirm_episodes,
                     eval_envs=args.eval_envs,
+                    continue_from=args.continue_from,
                 )
             except Exception:
                 if not args.keep_going:
