@@ -1,14 +1,17 @@
 """
 ``benchmarks/compare.py``'s own logic: the race measure (median time to a threshold, a missing seed counting as its
-budget) and the reading of ``--override`` values.
+budget), the reading of ``--override`` values, and a run trained on from a saved model (``--continue-from``).
 """
 
 from __future__ import annotations
 
+import json
 from typing import Any
 
 import pytest
 from test_zoo import load_script
+
+from sb3_es import ARS
 
 
 def run(
@@ -75,3 +78,26 @@ def test_overrides_read_yaml_values_and_exponent_numbers() -> None:
     assert overrides["ppo"] == {"learning_rate": "lin_3e-4"}
     with pytest.raises(SystemExit, match="use ALGO:KEY=VALUE"):
         parse_overrides(["n_timesteps=5e7"])
+
+
+def test_a_run_continues_from_its_last_model(tmp_path: Any) -> None:
+    main = load_script("compare").main
+    common = ["--algos", "ars_es", "--envs", "CartPole-v1", "--seeds", "0", "--eval-freq", "1000"]
+    common += ["--eval-episodes", "1", "--override", "ars_es:n_delta=2", "ars_es:n_top=2"]
+    main([*common, "--steps", "2000", "--out", str(tmp_path / "first")])
+    first = tmp_path / "first" / "logs" / "ars_es" / "CartPole-v1_1_seed0"
+    saved = json.loads((first / "summary.json").read_text())["env_steps"]
+    checkpoint = first / "last_model.zip"
+    assert ARS.load(checkpoint).num_timesteps == saved  # saved at the last evaluation, the end of training
+
+    main([*common, "--steps", "2000", "--out", str(tmp_path / "second"), "--continue-from", str(checkpoint)])
+    second = json.loads((tmp_path / "second" / "logs" / "ars_es" / "CartPole-v1_1_seed0" / "summary.json").read_text())
+    assert second["continued_from"] == {"model": str(checkpoint.resolve()), "env_steps": saved}
+    assert second["eval_timesteps"][0] == saved  # the step count goes on, and so does the evaluation grid
+    assert second["eval_timesteps"][1] == (saved // 1000 + 1) * 1000
+    assert saved + 2000 <= second["env_steps"] < saved + 4000
+
+    with pytest.raises(ValueError, match="lies in the run folder .* give another --out"):
+        main([*common, "--steps", "2000", "--out", str(tmp_path / "first"), "--continue-from", str(checkpoint)])
+    with pytest.raises(SystemExit, match="one algorithm, env and seed"):
+        main([*common[:5], "0", "1", *common[6:], "--steps", "10", "--continue-from", str(checkpoint)])
