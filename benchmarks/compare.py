@@ -452,7 +452,7 @@ def run_one(
     (folder / "setup.txt").write_text(setup_log.getvalue())
     model, hyperparams = result
     total = manager.n_timesteps
-    offset = model.num_timesteps if continue_from is not None else 0
+    offset = model.num_timesteps  # 0 for a new model; a continued one goes on from its saved count
     progress = Progress(label, offset + total if steps else None, seconds)
     n_envs = model.get_env().num_envs  # type: ignore[union-attr]
     recorder = RecordingEvalCallback(

@@ -97,6 +97,8 @@ def test_a_run_continues_from_its_last_model(tmp_path: Any) -> None:
     assert second["eval_timesteps"][1] == (saved // 1000 + 1) * 1000
     assert saved + 2000 <= second["env_steps"] < saved + 4000
 
+    with pytest.raises(ValueError, match="no such model; give a saved model's .zip file"):
+        main([*common, "--steps", "10", "--out", str(tmp_path / "third"), "--continue-from", str(first / "none.zip")])
     with pytest.raises(ValueError, match="lies in the run folder .* give another --out"):
         main([*common, "--steps", "2000", "--out", str(tmp_path / "first"), "--continue-from", str(checkpoint)])
     with pytest.raises(SystemExit, match="one algorithm, env and seed"):
