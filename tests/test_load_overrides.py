@@ -46,7 +46,10 @@ CASES: dict[type[BaseAlgorithm], Case] = {
     ),
     CMAES: Case(dict(population_size=4), dict(max_restarts=0, n_eval_episodes=2), 4 * 2 * 200, dict(sigma=0.5)),
     PGPE: Case(
-        dict(population_size=8), dict(population_size=4, stdev_learning_rate=0.05), 4 * 200, dict(stdev_init=0.5)
+        dict(population_size=8),
+        dict(population_size=4, stdev_learning_rate=0.05, max_speed=0.1),
+        4 * 200,
+        dict(stdev_init=0.5),
     ),
     SimpleES: Case(dict(population_size=8), dict(population_size=4, sigma=0.05), 4 * 200, dict(n_elite=2)),
     REINFORCE: Case(dict(n_episodes=4), dict(learning_rate=0.05, n_episodes=2), 2 * 200, dict(use_baseline=True)),

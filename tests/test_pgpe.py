@@ -144,6 +144,28 @@ def test_resume_restores_the_strategy_state(tmp_path: Path, optimizer: str) -> N
     assert not np.all(straight.strategy.stdev == 0.1)  # the stdevs adapted, so equality is not trivial
 
 
+def test_load_continues_with_a_smaller_step(tmp_path: Path) -> None:
+    """``load(max_speed=...)`` cuts ClipUp's step from the next update on; a default center rate follows it."""
+    model = pendulum_model()
+    model.learn(3 * PENDULUM_GENERATION)
+    assert model.strategy.optimizer_stats()["speed"] > 0.06
+    model.save(tmp_path / "model.zip")
+    loaded = PGPE.load(tmp_path / "model.zip", env=pendulum_env(), max_speed=0.02)
+    assert (loaded.strategy.max_speed, loaded.strategy.center_learning_rate) == (0.02, 0.01)
+    (row,) = learn_logged(loaded, PENDULUM_GENERATION, tmp_path, reset_num_timesteps=False)
+    assert float(row["train/learning_rate"]) == 0.01
+    assert float(row["train/speed"]) == pytest.approx(0.02)  # the saved velocity, above 0.06, was cut
+    kept = PGPE.load(tmp_path / "model.zip", max_speed=0.02, center_learning_rate=0.005)
+    assert (kept.strategy.max_speed, kept.strategy.center_learning_rate) == (0.02, 0.005)
+
+
+def test_load_refuses_max_speed_without_clipup(tmp_path: Path) -> None:
+    model = pendulum_model(optimizer="adam", center_learning_rate=0.01)
+    model.save(tmp_path / "model.zip")
+    with pytest.raises(ValueError, match=r"optimizer='adam': .* and no max_speed"):
+        PGPE.load(tmp_path / "model.zip", max_speed=0.1)
+
+
 def test_fitness_reward_shaping_reaches_the_evaluator() -> None:
     model = pendulum_model(reward_clip=(-1.0, 1.0), terminal_reward=0.0, alive_bonus_offset=0.5)
     shaping = model.reward_shaping

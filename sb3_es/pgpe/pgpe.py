@@ -19,6 +19,20 @@ from sb3_es.strategies.pgpe import PGPEStrategy
 SelfPGPE = TypeVar("SelfPGPE", bound="PGPE")
 
 
+def check_step_sizes(optimizer: str, max_speed: float | None, center_learning_rate: float | None) -> None:
+    """
+    :raises ValueError: For a step size that is not positive, or one that ``optimizer`` does not use.
+    """
+    for name, value in (("max_speed", max_speed), ("center_learning_rate", center_learning_rate)):
+        if value is not None:
+            check_positive(name, value)
+    if optimizer != "clipup" and (center_learning_rate is None or max_speed is not None):
+        raise ValueError(
+            f"optimizer={optimizer!r}: pass center_learning_rate (None means max_speed / 2, a ClipUp setting) "
+            "and no max_speed (ClipUp's speed limit)."
+        )
+
+
 class PGPE(PopulationAlgorithm):
     """
     Parameter-exploring policy gradients (Sehnke et al., 2010, https://doi.org/10.1016/j.neunet.2009.12.004)
@@ -29,7 +43,8 @@ class PGPE(PopulationAlgorithm):
     :param population_size: Candidates per generation (even: symmetric pairs).
     :param stdev_init: Initial standard deviation of every parameter.
     :param max_speed: ClipUp's largest step (norm of the velocity), a distance in parameter space; ``None``:
-        ``DEFAULT_MAX_SPEED`` (0.15). ClipUp only.
+        ``DEFAULT_MAX_SPEED`` (0.15). ClipUp only. ``load()`` may change it, and ``center_learning_rate``, to
+        continue a run with a smaller step.
     :param center_learning_rate: Step size of the center optimizer. ``None``: ``max_speed / 2`` with ClipUp (the
         ClipUp paper's recommendation); required with ``"adam"`` or ``"sgd"``.
     :param stdev_learning_rate: Step size of the standard deviations.
@@ -42,7 +57,14 @@ class PGPE(PopulationAlgorithm):
     """
 
     strategy: PGPEStrategy
-    strategy_hyperparameters = ("population_size", "stdev_learning_rate", "stdev_max_change", "fitness_shaping")
+    strategy_hyperparameters = (
+        "population_size",
+        "stdev_learning_rate",
+        "stdev_max_change",
+        "fitness_shaping",
+        "max_speed",
+        "center_learning_rate",
+    )
     #: ClipUp's max speed when ``max_speed`` is not given (pgpelib's CartPole example; the center learning rate
     #: is then 0.075).
     DEFAULT_MAX_SPEED: ClassVar[float] = 0.15
@@ -75,14 +97,7 @@ class PGPE(PopulationAlgorithm):
         max_episode_steps: int | None = None,
         _init_setup_model: bool = True,
     ) -> None:
-        for name, value in (("max_speed", max_speed), ("center_learning_rate", center_learning_rate)):
-            if value is not None:
-                check_positive(name, value)
-        if optimizer != "clipup" and (center_learning_rate is None or max_speed is not None):
-            raise ValueError(
-                f"optimizer={optimizer!r}: pass center_learning_rate (None means max_speed / 2, a ClipUp setting) "
-                "and no max_speed (ClipUp's speed limit)."
-            )
+        check_step_sizes(optimizer, max_speed, center_learning_rate)
         super().__init__(**base_arguments(super().__init__, locals()))
         self.population_size = population_size
         self.stdev_init = stdev_init
@@ -96,23 +111,32 @@ class PGPE(PopulationAlgorithm):
         if _init_setup_model:
             self._setup_model()
 
-    def _make_strategy(self, center: np.ndarray, seed: np.random.SeedSequence) -> PGPEStrategy:
-        clipup = self.optimizer == "clipup"
+    def _step_sizes(self) -> dict[str, Any]:
+        """:return: The center optimizer's ``max_speed`` (``None`` unless ClipUp) and ``center_learning_rate``."""
         max_speed = self.DEFAULT_MAX_SPEED if self.max_speed is None else self.max_speed
         learning_rate = max_speed / 2 if self.center_learning_rate is None else self.center_learning_rate
+        return dict(max_speed=max_speed if self.optimizer == "clipup" else None, center_learning_rate=learning_rate)
+
+    def _make_strategy(self, center: np.ndarray, seed: np.random.SeedSequence) -> PGPEStrategy:
         return PGPEStrategy(
             center,
             self.population_size,
             stdev_init=self.stdev_init,
-            center_learning_rate=learning_rate,
             stdev_learning_rate=self.stdev_learning_rate,
             stdev_max_change=self.stdev_max_change,
             optimizer=self.optimizer,
-            max_speed=max_speed if clipup else None,
             momentum=self.momentum,
             fitness_shaping=self.fitness_shaping,
             seed=seed,
+            **self._step_sizes(),
         )
+
+    def _apply_hyperparameters(self, changed: dict[str, Any]) -> None:
+        # A new max_speed also moves a center learning rate left to its default (max_speed / 2).
+        if changed.keys() & {"max_speed", "center_learning_rate"}:
+            check_step_sizes(self.optimizer, self.max_speed, self.center_learning_rate)
+            changed = {**changed, **self._step_sizes()}
+        super()._apply_hyperparameters(changed)
 
     def learn(
         self: SelfPGPE,

@@ -151,6 +151,27 @@ class GradientStrategy(Strategy):
         self.optimizer.step()
         self.center = self._theta.detach().numpy().copy()
 
+    @property
+    def max_speed(self) -> float | None:
+        """:return: ClipUp's largest step; ``None`` with another optimizer."""
+        return self.optimizer.param_groups[0]["max_speed"] if isinstance(self.optimizer, ClipUp) else None
+
+    @max_speed.setter
+    def max_speed(self, value: float | None) -> None:
+        """
+        Change ClipUp's largest step from the next update on (a velocity above it is cut then).
+
+        :param value: A positive number with ClipUp, ``None`` with another optimizer.
+        """
+        if not isinstance(self.optimizer, ClipUp):
+            if value is not None:
+                raise ValueError(f"max_speed={value} is a ClipUp setting; this strategy's optimizer is not ClipUp.")
+            return
+        if value is None or not (np.isfinite(value) and value > 0):
+            raise ValueError(f"max_speed={value}: ClipUp's largest step must be a positive number.")
+        for group in self.optimizer.param_groups:
+            group["max_speed"] = float(value)
+
     def optimizer_stats(self) -> dict[str, Any]:
         """:return: ``{"speed": |velocity|}`` for ClipUp (how far the last step went), else nothing."""
         if isinstance(self.optimizer, ClipUp):

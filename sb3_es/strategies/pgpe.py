@@ -82,6 +82,12 @@ class PGPEStrategy(GradientStrategy):
         """:return: The center optimizer's step size (``learning_rate`` of :class:`GradientStrategy`)."""
         return self.learning_rate
 
+    @center_learning_rate.setter
+    def center_learning_rate(self, value: float) -> None:
+        if not (np.isfinite(value) and value > 0):
+            raise ValueError(f"center_learning_rate={value}: it must be a positive number.")
+        self.learning_rate = float(value)
+
     def _ask(self) -> np.ndarray:
         half = self.population_size // 2
         self._scaled_noise = self.stdev * self.rng.standard_normal((half, self.num_params))
