@@ -410,6 +410,7 @@ def run_one(
         budget in steps counts from there; the wall-clock columns count this run only.
     :return: The run summary (also written to the run folder's ``summary.json``).
     """
+    started = time.strftime("%Y-%m-%d %H:%M %Z")
     config, note = config_for(algo, env_id, out)
     folder = run_folder(out, algo, env_id, seed)
     if continue_from is not None:
@@ -507,7 +508,8 @@ def run_one(
         "tensorboard_dir": tb_dir,
         "model": str(folder / f"{manager.env_name}.zip"),
         "command": command,
-        "date": time.strftime("%Y-%m-%d %H:%M %Z"),
+        "started": started,
+        "date": time.strftime("%Y-%m-%d %H:%M %Z"),  # the end of the run
         "hardware": hardware(),
         "commit": source_commit(),
     }
@@ -663,7 +665,8 @@ def write_report(out: Path, runs: list[dict[str, Any]], thresholds: dict[str, fl
     :param command: Command line, for the record.
     :return: Path of ``results.md``.
     """
-    dates = [r.get("date") or "?" for r in runs]
+    ends = [r.get("date") or "?" for r in runs]
+    starts = [r.get("started") or r.get("date") or "?" for r in runs]  # summaries before "started": the end
     lines = [
         "# Benchmark results",
         "",
@@ -671,7 +674,7 @@ def write_report(out: Path, runs: list[dict[str, Any]], thresholds: dict[str, fl
         f"- Report command: `{command}`",
         *[f"- Hardware: {h}" for h in sorted({r.get("hardware") or hardware() for r in runs})],
         f"- Versions: {versions('rl_zoo3')}",
-        f"- Runs dated: {min(dates)} to {max(dates)}",
+        f"- Runs: first started {min(starts)}, last ended {max(ends)}",
         "- Returns: mean over the evaluation episodes of the deterministic policy; across seeds, mean ± std.",
         "  *final*: last evaluation; *env steps*: taken (a run ends within one generation or rollout past its",
         "  budget); wall-clock excludes evaluations.",

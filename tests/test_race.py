@@ -96,6 +96,8 @@ def test_a_run_continues_from_its_last_model(tmp_path: Any) -> None:
     assert second["eval_timesteps"][0] == saved  # the step count goes on, and so does the evaluation grid
     assert second["eval_timesteps"][1] == (saved // 1000 + 1) * 1000
     assert saved + 2000 <= second["env_steps"] < saved + 4000
+    report = (tmp_path / "second" / "results.md").read_text()  # the run's start and end, not its end twice
+    assert f"- Runs: first started {second['started']}, last ended {second['date']}" in report
 
     with pytest.raises(ValueError, match="no such model; give a saved model's .zip file"):
         main([*common, "--steps", "10", "--out", str(tmp_path / "third"), "--continue-from", str(first / "none.zip")])
