@@ -164,7 +164,7 @@ def measure_plain(env_id: str, n_procs: int, seconds: float, warmup: float = 1.0
     :param warmup: Untimed seconds before the window.
     :return: The measurement.
     """
-    ctx = mp.get_context("forkserver" if "forkserver" in mp.get_all_start_methods() else "spawn")
+    ctx: Any = mp.get_context("forkserver" if "forkserver" in mp.get_all_start_methods() else "spawn")
     barrier, queue = ctx.Barrier(n_procs), ctx.Queue()
     procs = [
         ctx.Process(target=_plain_worker, args=(env_id, seconds, warmup, i, barrier, queue)) for i in range(n_procs)

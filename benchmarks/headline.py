@@ -89,7 +89,7 @@ def main() -> None:
     out.mkdir(parents=True, exist_ok=True)
     commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
     info = {"system": system_info(), "date": time.strftime("%Y-%m-%d %H:%M %Z"), "commit": commit}
-    record = {"args": vars(args), "kwargs": kwargs, "runs": rows, "median": median, **info}
+    record: dict[str, Any] = {"args": vars(args), "kwargs": kwargs, "runs": rows, "median": median, **info}
     (out / "headline.json").write_text(json.dumps(record, indent=2, default=str))
 
 

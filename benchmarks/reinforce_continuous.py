@@ -55,7 +55,7 @@ def run_seed(config: dict[str, Any]) -> dict[str, Any]:
 
     def evaluate(deterministic: bool) -> float:
         mean, _ = evaluate_policy(model, eval_env, n_eval_episodes=config["eval_episodes"], deterministic=deterministic)
-        return float(mean)
+        return float(np.mean(mean))
 
     before = {"stochastic": evaluate(False), "deterministic": evaluate(True)}
     start = time.perf_counter()

@@ -157,7 +157,7 @@ def measure_ours_sharded(
     ``evaluator="ray"`` builds it): the row is labelled ``default``.
     """
     given = {"num_workers": workers, "envs_per_worker": envs_per_worker}
-    layout = {key: value for key, value in given.items() if value is not None}
+    layout: dict[str, Any] = {key: value for key, value in given.items() if value is not None}
     start = time.perf_counter()
     evaluator: ShardedEvaluator
     if host == "ray":
