@@ -29,6 +29,7 @@ from algorithms import (
     spy_on_ask,
 )
 from stable_baselines3 import PPO
+from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.save_util import load_from_zip_file
 
 from sb3_es import ARS
@@ -163,6 +164,36 @@ def test_resume_is_identical_to_an_uninterrupted_run(algo: Algo, n: int, tmp_pat
     if algo.population:
         np.testing.assert_array_equal(straight.strategy.center, resumed.strategy.center)
         np.testing.assert_array_equal(straight.strategy.ask(), resumed.strategy.ask())
+
+
+class SaveMidway(BaseCallback):
+    """Saves the model half-way through its first generation."""
+
+    def __init__(self, path: Path) -> None:
+        super().__init__()
+        self.path = path
+        self.asked_then: Any = None
+
+    def _on_step(self) -> bool:
+        if self.num_timesteps == GENERATION // 2:
+            self.model.save(self.path)
+            self.asked_then = self.model.strategy._asked
+        return True
+
+
+@pytest.mark.parametrize("algo", POPULATION_ALGORITHMS)
+def test_a_save_in_mid_generation_leaves_out_the_candidates_asked(algo: Algo, tmp_path: Path) -> None:
+    model = build(algo, **MLP)
+    callback = SaveMidway(tmp_path / "midway.zip")
+    model.learn(GENERATION, callback=callback)
+    assert callback.asked_then is not None  # the generation in progress kept its candidates and finished
+    assert model.num_timesteps == GENERATION and model._n_updates == 1
+    loaded = type(model).load(tmp_path / "midway.zip", env=pendulum_env())
+    assert {name: getattr(loaded.strategy, name) for name in loaded.strategy.pending_attributes} == dict.fromkeys(
+        loaded.strategy.pending_attributes
+    )
+    loaded.learn(GENERATION, reset_num_timesteps=False)  # asks a generation afresh
+    assert loaded._n_updates == 1
 
 
 # ---------------------------------------------------------------------------- bad files

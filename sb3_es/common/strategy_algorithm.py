@@ -6,6 +6,7 @@ from __future__ import annotations
 import io
 import pathlib
 from abc import abstractmethod
+from collections.abc import Iterable
 from typing import Any, ClassVar
 
 import numpy as np
@@ -159,6 +160,25 @@ class StrategyAlgorithm(ESBaseAlgorithm):
         """
         assert self.strategy is not None
         return self.strategy.best_params
+
+    def save(
+        self,
+        path: str | pathlib.Path | io.BufferedIOBase,
+        exclude: Iterable[str] | None = None,
+        include: Iterable[str] | None = None,
+    ) -> None:
+        """
+        SB3's ``save()``, with the strategy as it stands between generations (``Strategy.without_pending``): a
+        save from a callback in the middle of a generation leaves out the candidates asked, which a loaded model
+        asks afresh anyway.
+        """
+        strategy = self.strategy
+        if strategy is not None:
+            self.strategy = strategy.without_pending()
+        try:
+            super().save(path, exclude, include)
+        finally:
+            self.strategy = strategy
 
     def set_parameters(
         self,

@@ -26,6 +26,8 @@ class ARSStrategy(Strategy):
         drawing them fresh.
     """
 
+    pending_attributes = (*Strategy.pending_attributes, "_deltas")
+
     def __init__(
         self,
         center: np.ndarray,

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -38,6 +38,8 @@ class Strategy(ABC):
     forget_best: bool = False
     #: Version of the pickled state: files from before version 2 are upgraded on load (see ``__setstate__``).
     STATE_VERSION = 2
+    #: Attributes that hold the generation in progress: what ``ask()`` made and ``tell()`` needs of it.
+    pending_attributes: ClassVar[tuple[str, ...]] = ("_asked",)
 
     def __init__(self, center: np.ndarray, seed: int | np.random.SeedSequence | None = None) -> None:
         self.center = np.asarray(center, dtype=np.float64).copy()
@@ -107,6 +109,16 @@ class Strategy(ABC):
         if center.shape != self.center.shape:
             raise ValueError(f"Center of shape {center.shape} does not match the strategy's {self.center.shape}.")
         self.center = center.copy()
+
+    def without_pending(self) -> Strategy:
+        """
+        :return: A shallow copy that forgets the generation in progress (its candidates, their noise), which is
+            what a saved model keeps: a loaded model asks its next generation afresh, and on a large network the
+            asked candidates are most of a mid-generation strategy's size.
+        """
+        snapshot = type(self).__new__(type(self))  # not copy.copy: __setstate__ may rewrite the state it is given
+        snapshot.__dict__.update({**self.__dict__, **dict.fromkeys(self.pending_attributes)})
+        return snapshot
 
     @property
     def restored_legacy_state(self) -> bool:

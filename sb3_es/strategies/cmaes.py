@@ -74,6 +74,8 @@ class CMAESStrategy(Strategy):
     :param seed: Seed of the private random state.
     """
 
+    pending_attributes = (*Strategy.pending_attributes, "_solutions")
+
     def __init__(
         self,
         center: np.ndarray,

@@ -54,6 +54,8 @@ class OpenESStrategy(GradientStrategy):
         :class:`~sb3_es.strategies.noise.NoiseTablePopulation`, which Ray ships as offsets).
     """
 
+    pending_attributes = (*GradientStrategy.pending_attributes, "_noise")
+
     def __init__(
         self,
         center: np.ndarray,

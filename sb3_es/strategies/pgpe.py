@@ -37,6 +37,8 @@ class PGPEStrategy(GradientStrategy):
     :param seed: Seed of the random generator.
     """
 
+    pending_attributes = (*GradientStrategy.pending_attributes, "_scaled_noise")
+
     def __init__(
         self,
         center: np.ndarray,
