@@ -32,6 +32,7 @@ from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.save_util import load_from_zip_file
 
+import sb3_es
 from sb3_es import ARS
 
 GENERATION = 2 * 200  # Pendulum-v1, 2 candidates (episodes) per generation, one env
@@ -347,3 +348,16 @@ def test_files_saved_before_strategy_state_version_2_load_and_continue(name: str
     buffer.seek(0)
     data, _, _ = load_from_zip_file(buffer)
     assert data is not None and data["strategy"].state_version == 2
+
+
+# ---------------------------------------------------------------------------- shipped models
+TRAINED = sorted((Path(__file__).resolve().parents[1] / "benchmarks" / "trained").glob("*.zip"))
+
+
+@pytest.mark.parametrize("path", TRAINED, ids=lambda path: path.name)
+def test_shipped_trained_models_load_and_act(path: Path) -> None:
+    """The models under ``benchmarks/trained/`` (docs show and continue them) load with this code and act."""
+    data, _, _ = load_from_zip_file(path)
+    model = getattr(sb3_es, data["_algorithm_name"]).load(path)
+    action, _ = model.predict(model.observation_space.sample(), deterministic=True)
+    assert model.action_space.contains(action.astype(model.action_space.dtype))
