@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from sb3_es.strategies.base import Population, Strategy
+from sb3_es.strategies.base import Population, Strategy, check_positive_number
 from sb3_es.strategies.noise import NoiseTablePopulation, SharedNoiseTable
 
 
@@ -54,8 +54,7 @@ class ARSStrategy(Strategy):
         if int(self.n_top) != self.n_top or not 1 <= self.n_top <= self.n_delta:
             raise ValueError(f"n_top={self.n_top} must be between 1 and n_delta={self.n_delta}.")
         for name, value in (("delta_std", self.delta_std), ("learning_rate", self.learning_rate)):
-            if not (np.isfinite(value) and value > 0):
-                raise ValueError(f"{name}={value}: it must be a positive number.")
+            check_positive_number(name, value)
 
     @property
     def population_size(self) -> int:

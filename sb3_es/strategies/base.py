@@ -134,6 +134,12 @@ class Strategy(ABC):
         self.__dict__.update(state)
 
 
+def check_positive_number(name: str, value: float) -> None:
+    """:raises ValueError: Naming ``name`` when ``value`` is not a finite number above 0."""
+    if not (np.isfinite(value) and value > 0):
+        raise ValueError(f"{name}={value}: it must be a positive number.")
+
+
 def candidate(population: Population, index: int) -> np.ndarray:
     """
     :param population: The candidates, dense or read from a noise table.

@@ -6,7 +6,7 @@ from typing import Any
 
 import numpy as np
 
-from sb3_es.strategies.base import Population
+from sb3_es.strategies.base import Population, check_positive_number
 from sb3_es.strategies.fitness import FitnessShaping, centered_ranks, shape_fitness
 from sb3_es.strategies.noise import NoiseTablePopulation, SharedNoiseTable
 from sb3_es.strategies.optimizers import GradientStrategy, OptimizerName
@@ -98,8 +98,7 @@ class OpenESStrategy(GradientStrategy):
                 f"population_size={population_size}: it must be at least 2, and even with antithetic sampling."
             )
         for name, value in (("sigma", self.sigma), ("learning_rate", self.learning_rate)):
-            if not (np.isfinite(value) and value > 0):
-                raise ValueError(f"{name}={value}: it must be a positive number.")
+            check_positive_number(name, value)
         if self.weight_decay < 0:
             raise ValueError(f"weight_decay={self.weight_decay}: it must be >= 0.")
         for name, rate in (("sigma_decay", self.sigma_decay), ("learning_rate_decay", self.learning_rate_decay)):

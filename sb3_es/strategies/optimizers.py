@@ -14,7 +14,7 @@ from typing import Any, Literal
 import numpy as np
 import torch as th
 
-from sb3_es.strategies.base import Strategy
+from sb3_es.strategies.base import Strategy, check_positive_number
 
 OptimizerName = Literal["adam", "sgd", "clipup"]
 #: The optimizer names, for validation messages.
@@ -133,8 +133,7 @@ class GradientStrategy(Strategy):
         seed: int | np.random.SeedSequence | None = None,
     ) -> None:
         super().__init__(center, seed)
-        if not (np.isfinite(learning_rate) and learning_rate > 0):
-            raise ValueError(f"learning_rate={learning_rate}: it must be a positive number.")
+        check_positive_number("learning_rate", learning_rate)
         self.learning_rate = float(learning_rate)
         self._theta = th.nn.Parameter(th.as_tensor(self.center, dtype=th.float64).clone())
         self.optimizer = make_optimizer(optimizer, [self._theta], self.learning_rate, momentum, betas, max_speed)
@@ -167,8 +166,9 @@ class GradientStrategy(Strategy):
             if value is not None:
                 raise ValueError(f"max_speed={value} is a ClipUp setting; this strategy's optimizer is not ClipUp.")
             return
-        if value is None or not (np.isfinite(value) and value > 0):
-            raise ValueError(f"max_speed={value}: ClipUp's largest step must be a positive number.")
+        if value is None:
+            raise ValueError("max_speed=None: ClipUp needs a largest step, a positive number.")
+        check_positive_number("max_speed", value)
         for group in self.optimizer.param_groups:
             group["max_speed"] = float(value)
 

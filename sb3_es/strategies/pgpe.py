@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from sb3_es.strategies.base import check_positive_number
 from sb3_es.strategies.fitness import FitnessShaping, shape_fitness
 from sb3_es.strategies.optimizers import GradientStrategy, OptimizerName
 
@@ -57,8 +58,7 @@ class PGPEStrategy(GradientStrategy):
     ) -> None:
         super().__init__(center, center_learning_rate, optimizer, momentum, betas, max_speed, seed)
         self.population_size = population_size
-        if not (np.isfinite(stdev_init) and stdev_init > 0):
-            raise ValueError(f"stdev_init={stdev_init}: it must be a positive number.")
+        check_positive_number("stdev_init", stdev_init)
         self.stdev = np.full(self.num_params, float(stdev_init))
         self.stdev_learning_rate = float(stdev_learning_rate)
         self.stdev_max_change = float(stdev_max_change)
@@ -86,8 +86,7 @@ class PGPEStrategy(GradientStrategy):
 
     @center_learning_rate.setter
     def center_learning_rate(self, value: float) -> None:
-        if not (np.isfinite(value) and value > 0):
-            raise ValueError(f"center_learning_rate={value}: it must be a positive number.")
+        check_positive_number("center_learning_rate", value)
         self.learning_rate = float(value)
 
     def _ask(self) -> np.ndarray:

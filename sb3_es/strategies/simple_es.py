@@ -6,7 +6,7 @@ from typing import Literal
 
 import numpy as np
 
-from sb3_es.strategies.base import Population, Strategy
+from sb3_es.strategies.base import Population, Strategy, check_positive_number
 from sb3_es.strategies.noise import NoiseTablePopulation, SharedNoiseTable
 
 EliteWeights = Literal["equal", "linear", "log"]
@@ -83,8 +83,7 @@ class SimpleESStrategy(Strategy):
             raise ValueError(f"population_size={self.population_size}: it must be at least 2.")
         if not 1 <= self.n_elite <= self.population_size:
             raise ValueError(f"n_elite={self.n_elite} must be between 1 and population_size={self.population_size}.")
-        if not (np.isfinite(self.sigma) and self.sigma > 0):
-            raise ValueError(f"sigma={self.sigma}: it must be a positive number.")
+        check_positive_number("sigma", self.sigma)
 
     def _ask(self) -> Population:
         if self.noise_table is None:
