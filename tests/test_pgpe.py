@@ -80,6 +80,29 @@ def test_stdev_change_is_bounded(direction: float) -> None:
     np.testing.assert_allclose(strategy.stdev, 1.0 + direction * 0.2, rtol=1e-12)
 
 
+def test_max_stdev_bounds_the_adapted_stdev() -> None:
+    """The update that would raise every stdev by 20% (to 1.2) stops at max_stdev; one set later applies at ask()."""
+    kwargs: dict[str, Any] = dict(stdev_init=1.0, center_learning_rate=0.1, stdev_learning_rate=1e6, seed=0)
+    strategy = PGPEStrategy(np.zeros(3), 200, max_stdev=1.1, **kwargs)
+    population = strategy.ask()
+    strategy.tell(np.sum(population**2, axis=1))
+    np.testing.assert_array_equal(strategy.stdev, 1.1)
+    strategy.max_stdev = 0.5
+    noise = strategy.ask()[:100] - strategy.center  # the "+" half: stdev * eps
+    np.testing.assert_array_equal(strategy.stdev, 0.5)
+    assert np.std(noise) == pytest.approx(0.5, rel=0.1)
+
+
+def test_a_strategy_saved_before_max_stdev_loads_unbounded() -> None:
+    strategy = PGPEStrategy(np.zeros(3), 4, stdev_init=1.0, center_learning_rate=0.1, seed=0)
+    state = dict(strategy.__dict__)
+    del state["max_stdev"]
+    restored = PGPEStrategy.__new__(PGPEStrategy)
+    restored.__setstate__(state)
+    assert restored.max_stdev is None
+    restored.tell(np.arange(4.0)[np.argsort(restored.ask()[:, 0])])
+
+
 def test_converges_on_a_sphere() -> None:
     """Maximize -||x - 1||^2 from 0 in 10 dimensions: ClipUp's steps bring the center within max_speed."""
     strategy = PGPEStrategy(np.zeros(10), 20, stdev_init=0.5, center_learning_rate=0.05, max_speed=0.1, seed=0)
@@ -157,6 +180,31 @@ def test_load_continues_with_a_smaller_step(tmp_path: Path) -> None:
     assert float(row["train/speed"]) == pytest.approx(0.02)  # the saved velocity, above 0.06, was cut
     kept = PGPE.load(tmp_path / "model.zip", max_speed=0.02, center_learning_rate=0.005)
     assert (kept.strategy.max_speed, kept.strategy.center_learning_rate) == (0.02, 0.005)
+
+
+def test_load_narrows_the_search_distribution(tmp_path: Path) -> None:
+    """``load(max_stdev=...)`` bounds the adapted standard deviations from the next generation on."""
+    model = pendulum_model()
+    model.learn(3 * PENDULUM_GENERATION)
+    assert model.strategy.stdev.min() > 0.05  # the bound below lowers every one
+    model.save(tmp_path / "model.zip")
+    loaded = PGPE.load(tmp_path / "model.zip", env=pendulum_env(), max_stdev=0.05)
+    assert loaded.max_stdev == loaded.strategy.max_stdev == 0.05
+    (row,) = learn_logged(loaded, PENDULUM_GENERATION, tmp_path, reset_num_timesteps=False)
+    assert float(row["train/stdev_max"]) <= 0.05
+    assert loaded.strategy.stdev.max() <= 0.05
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        (dict(max_stdev=0.05), r"stdev_init=0.1 is above max_stdev=0.05: lower it, or raise max_stdev"),
+        (dict(max_stdev=0.0, stdev_init=0.1), r"max_stdev=0.0: it must be a positive number"),
+    ],
+)
+def test_max_stdev_errors(kwargs: dict[str, Any], message: str) -> None:
+    with pytest.raises(ValueError, match=message):
+        pendulum_model(**kwargs)
 
 
 def test_load_refuses_max_speed_without_clipup(tmp_path: Path) -> None:

@@ -49,6 +49,8 @@ class PGPE(PopulationAlgorithm):
         ClipUp paper's recommendation); required with ``"adam"`` or ``"sgd"``.
     :param stdev_learning_rate: Step size of the standard deviations.
     :param stdev_max_change: Largest relative change of a standard deviation per generation, in (0, 1).
+    :param max_stdev: Upper bound of every standard deviation (``None``: none). ``load()`` may set or change it,
+        to continue a run with a narrower search distribution.
     :param optimizer: ``"clipup"`` (default), ``"adam"`` or ``"sgd"`` for the center.
     :param momentum: ClipUp's (and SGD's) momentum.
     :param fitness_shaping: ``"centered_rank"`` (default), ``"zscore"`` or ``"raw"``.
@@ -61,6 +63,7 @@ class PGPE(PopulationAlgorithm):
         "population_size",
         "stdev_learning_rate",
         "stdev_max_change",
+        "max_stdev",
         "fitness_shaping",
         "max_speed",
         "center_learning_rate",
@@ -79,6 +82,7 @@ class PGPE(PopulationAlgorithm):
         center_learning_rate: float | None = None,
         stdev_learning_rate: float = 0.1,
         stdev_max_change: float = 0.2,
+        max_stdev: float | None = None,
         optimizer: OptimizerName = "clipup",
         momentum: float = 0.9,
         fitness_shaping: FitnessShaping = "centered_rank",
@@ -105,6 +109,7 @@ class PGPE(PopulationAlgorithm):
         self.center_learning_rate = center_learning_rate
         self.stdev_learning_rate = stdev_learning_rate
         self.stdev_max_change = stdev_max_change
+        self.max_stdev = max_stdev
         self.optimizer = optimizer
         self.momentum = momentum
         self.fitness_shaping: FitnessShaping = fitness_shaping
@@ -124,6 +129,7 @@ class PGPE(PopulationAlgorithm):
             stdev_init=self.stdev_init,
             stdev_learning_rate=self.stdev_learning_rate,
             stdev_max_change=self.stdev_max_change,
+            max_stdev=self.max_stdev,
             optimizer=self.optimizer,
             momentum=self.momentum,
             fitness_shaping=self.fitness_shaping,

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from sb3_es.strategies.base import check_positive_number
@@ -22,7 +24,7 @@ class PGPEStrategy(GradientStrategy):
     - standard deviation gradient ``mean_k(((f+_k + f-_k) / 2 - b) * (z_k**2 - stdev**2) / stdev)`` with the
       baseline ``b`` the mean shaped fitness, followed by plain gradient ascent with ``stdev_learning_rate``;
       each standard deviation then moves by at most ``stdev_max_change`` times its value (0.2 in the ClipUp
-      paper), which also keeps it positive.
+      paper), which also keeps it positive, and stays at or below ``max_stdev`` where one is given.
 
     :param center: Initial center.
     :param population_size: Candidates per generation (even: symmetric pairs).
@@ -30,6 +32,8 @@ class PGPEStrategy(GradientStrategy):
     :param center_learning_rate: Step size of the center optimizer (ClipUp: length of one normalized step).
     :param stdev_learning_rate: Step size of the standard deviations.
     :param stdev_max_change: Largest relative change of a standard deviation in one generation, in (0, 1).
+    :param max_stdev: Upper bound of every standard deviation (``None``: none). A bound set later (``load()``)
+        lowers the larger ones at the next ``ask()``: a run goes on with a narrower search distribution.
     :param optimizer: ``"clipup"`` (default), ``"adam"`` or ``"sgd"``.
     :param max_speed: ClipUp's largest step (``None``: ``2 * center_learning_rate``).
     :param momentum: ClipUp's and SGD's momentum.
@@ -49,6 +53,7 @@ class PGPEStrategy(GradientStrategy):
         center_learning_rate: float,
         stdev_learning_rate: float = 0.1,
         stdev_max_change: float = 0.2,
+        max_stdev: float | None = None,
         optimizer: OptimizerName = "clipup",
         max_speed: float | None = None,
         momentum: float = 0.9,
@@ -63,7 +68,10 @@ class PGPEStrategy(GradientStrategy):
         self.stdev_learning_rate = float(stdev_learning_rate)
         self.stdev_max_change = float(stdev_max_change)
         self.fitness_shaping = fitness_shaping
+        self.max_stdev = None if max_stdev is None else float(max_stdev)
         self.check_settings()
+        if max_stdev is not None and max_stdev < stdev_init:
+            raise ValueError(f"stdev_init={stdev_init} is above max_stdev={max_stdev}: lower it, or raise max_stdev.")
         self._scaled_noise: np.ndarray | None = None
 
     def check_settings(self) -> None:
@@ -77,6 +85,8 @@ class PGPEStrategy(GradientStrategy):
                 f"stdev_max_change={self.stdev_max_change}: it must be in (0, 1) (a relative change; 0.2 in the "
                 "ClipUp paper), so that every standard deviation stays positive."
             )
+        if self.max_stdev is not None:
+            check_positive_number("max_stdev", self.max_stdev)
         shape_fitness(np.zeros(2), self.fitness_shaping)  # validates the name
 
     @property
@@ -89,7 +99,12 @@ class PGPEStrategy(GradientStrategy):
         check_positive_number("center_learning_rate", value)
         self.learning_rate = float(value)
 
+    def _bound_stdev(self) -> None:
+        if self.max_stdev is not None:
+            self.stdev = np.minimum(self.stdev, self.max_stdev)
+
     def _ask(self) -> np.ndarray:
+        self._bound_stdev()  # a max_stdev set since the last update (load()) applies from this generation on
         half = self.population_size // 2
         self._scaled_noise = self.stdev * self.rng.standard_normal((half, self.num_params))
         return np.concatenate([self.center + self._scaled_noise, self.center - self._scaled_noise])
@@ -104,6 +119,7 @@ class PGPEStrategy(GradientStrategy):
         target = self.stdev + self.stdev_learning_rate * stdev_grad
         bound = self.stdev_max_change * self.stdev
         self.stdev = np.clip(target, self.stdev - bound, self.stdev + bound)
+        self._bound_stdev()
         self._scaled_noise = None
         return {
             "learning_rate": self.learning_rate,
@@ -113,3 +129,7 @@ class PGPEStrategy(GradientStrategy):
             "stdev_max": float(self.stdev.max()),
             **self.optimizer_stats(),
         }
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        state.setdefault("max_stdev", None)  # saved before max_stdev existed
+        super().__setstate__(state)
