@@ -25,6 +25,7 @@ from sharded_helpers import (
 )
 from stable_baselines3.common.env_util import make_vec_env
 
+from sb3_es.common.policies import MlpPolicy
 from sb3_es.evaluation import VecEnvEvaluator
 from sb3_es.evaluation.process_worker import RemoteTraceback
 from sb3_es.evaluation.processes import ProcessEvaluator
@@ -183,6 +184,21 @@ def test_episodes_without_time_limit_are_cut_in_the_workers(host: str) -> None:
     # Every candidate's episode ended at the cap, in a worker, and the replay showed its done.
     assert model.ep_info_buffer is not None and {info["l"] for info in model.ep_info_buffer} == {15}
     assert counter.dones >= 6
+
+
+def test_reset_seeds_same_episodes_as_local(host: str) -> None:
+    """With reset seeds (common_seeds), each job starts from its own seed's state, wherever it runs."""
+    env = make_vec_env("Pendulum-v1", n_envs=1)
+    policy = MlpPolicy(env.observation_space, env.action_space, net_arch=[4])
+    population = np.random.default_rng(0).normal(scale=0.3, size=(5, policy.num_params))
+    reset_seeds = np.arange(10).reshape(5, 2) % 3  # repeated seeds across candidates and episodes
+    local = VecEnvEvaluator(make_vec_env("Pendulum-v1", n_envs=3)).evaluate(
+        policy, population, population[0], 2, seed=1, reset_seeds=reset_seeds
+    )
+    with make_evaluator(host, "Pendulum-v1", num_workers=2, envs_per_worker=2) as evaluator:
+        remote = evaluator.evaluate(policy, population, population[0], 2, seed=2, reset_seeds=reset_seeds)
+    np.testing.assert_allclose(remote.returns, local.returns, rtol=1e-6)
+    assert not np.allclose(local.returns[:, 0], local.returns[0, 0])
 
 
 def test_faults(host: str, tmp_path: Path, caplog: pytest.LogCaptureFixture, monkeypatch: pytest.MonkeyPatch) -> None:

@@ -59,6 +59,7 @@ class CMAES(PopulationAlgorithm):
         reward_clip: tuple[float, float] | None = None,
         terminal_reward: float | None = None,
         n_eval_episodes: int = 1,
+        common_seeds: bool = False,
         policy_kwargs: dict[str, Any] | None = None,
         stats_window_size: int = 100,
         tensorboard_log: str | None = None,

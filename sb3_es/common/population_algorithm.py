@@ -49,6 +49,11 @@ class PopulationAlgorithm(StrategyAlgorithm):
     :param learning_rate: Step size (float or schedule) of the algorithms that have one (``None`` for those,
         like CMA-ES, that adapt their own); its meaning depends on the algorithm.
     :param n_eval_episodes: Episodes per candidate.
+    :param common_seeds: Common random numbers: the candidates that the strategy compares with each other start
+        their episodes from the same states (the same reset seed for the e-th episode of each): the two members of
+        each mirrored pair (ARS, OpenES, PGPE; as estool does), the whole population otherwise (CMA-ES, SimpleES).
+        Their fitness differences then come from their parameters, not from their starting states. Each candidate
+        episode is then reset on its own (the VecEnv cannot be a ``VecEnvWrapper`` such as ``VecNormalize``).
     :param alive_bonus_offset: Added to the fitness once per step, to cancel alive bonuses.
     :param reward_clip: ``(low, high)``: clip each step's reward to this range in the fitness (``None``: no clipping).
     :param terminal_reward: In the fitness, the reward of a step that terminates an episode (a fall, not a time
@@ -81,6 +86,7 @@ class PopulationAlgorithm(StrategyAlgorithm):
     _live_hyperparameters: ClassVar[tuple[str, ...]] = (
         *ESBaseAlgorithm._live_hyperparameters,
         "n_eval_episodes",
+        "common_seeds",
         "alive_bonus_offset",
         "reward_clip",
         "terminal_reward",
@@ -99,6 +105,7 @@ class PopulationAlgorithm(StrategyAlgorithm):
         env: GymEnv | str | None,
         learning_rate: float | Schedule | None = None,
         n_eval_episodes: int = 1,
+        common_seeds: bool = False,
         alive_bonus_offset: float = 0.0,
         zero_policy: bool = True,
         reward_clip: tuple[float, float] | None = None,
@@ -121,6 +128,7 @@ class PopulationAlgorithm(StrategyAlgorithm):
         if learning_rate is not None:
             check_positive("learning_rate", learning_rate)
         self.n_eval_episodes = int(n_eval_episodes)
+        self.common_seeds = bool(common_seeds)
         self.alive_bonus_offset = float(alive_bonus_offset)
         shaping = RewardShaping.create(reward_clip, terminal_reward, self.alive_bonus_offset)
         self.reward_clip = shaping.reward_clip
@@ -229,6 +237,7 @@ class PopulationAlgorithm(StrategyAlgorithm):
         assert self.strategy is not None and self._env_rng is not None
         population = self._ask()
         seed = int(self._env_rng.integers(2**31 - 1))
+        reset_seeds = self._reset_seeds(len(population))
         callback.on_rollout_start()
 
         def step_hook(
@@ -258,6 +267,7 @@ class PopulationAlgorithm(StrategyAlgorithm):
             step_hook,
             self.reward_shaping,
             max_episode_steps=self.episode_step_limit(),
+            reset_seeds=reset_seeds,
         )
         callback.on_rollout_end()
         if result.stopped:
@@ -277,6 +287,19 @@ class PopulationAlgorithm(StrategyAlgorithm):
         self.policy.load_from_vector(self.strategy.center)
         self._record_generation(result, fitness)
         return True
+
+    def _reset_seeds(self, n_candidates: int) -> np.ndarray | None:
+        """
+        :param n_candidates: Size of the population asked.
+        :return: With ``common_seeds``, the reset seed of each candidate's episodes ``(n_candidates,
+            n_eval_episodes)``, shared within the strategy's seed groups; otherwise ``None``.
+        """
+        if not getattr(self, "common_seeds", False):  # models saved before common_seeds: off
+            return None
+        assert self.strategy is not None and self._env_rng is not None
+        groups = self.strategy.seed_groups(n_candidates)
+        group_seeds = self._env_rng.integers(2**31 - 1, size=(int(groups.max()) + 1, self.n_eval_episodes))
+        return group_seeds[groups]
 
     def _record_generation(self, result: PopulationResult, fitness: np.ndarray) -> None:
         """

@@ -153,6 +153,9 @@ class Generation:
     :param seed: Seed for the environments' resets in this generation.
     :param shaping: Per-step reward shaping of the fitness; ``None`` for none.
     :param max_episode_steps: Episode length cap (``None``: the env's own limit only).
+    :param reset_seeds: Reset seed of each candidate's episodes ``(n_candidates, n_episodes)``: each of these episodes
+        starts with ``reset(seed=...)``, so that candidates given the same seed start from the same state (common
+        random numbers). ``None``: every env slot goes on with its own random sequence, seeded from ``seed``.
     """
 
     network: NetworkSpec
@@ -162,6 +165,14 @@ class Generation:
     seed: int
     shaping: RewardShaping | None = None
     max_episode_steps: int | None = None
+    reset_seeds: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        if self.reset_seeds is not None and np.shape(self.reset_seeds) != (self.n_candidates, self.n_episodes):
+            raise ValueError(
+                f"reset_seeds has shape {np.shape(self.reset_seeds)}: it needs one seed per candidate and episode, "
+                f"({self.n_candidates}, {self.n_episodes})."
+            )
 
     @property
     def n_candidates(self) -> int:
@@ -195,6 +206,7 @@ class PopulationEvaluator(ABC):
         step_hook: StepHook | None = None,
         shaping: RewardShaping | None = None,
         max_episode_steps: int | None = None,
+        reset_seeds: np.ndarray | None = None,
     ) -> PopulationResult:
         """
         Evaluate every candidate for ``n_episodes`` episodes.
@@ -209,9 +221,13 @@ class PopulationEvaluator(ABC):
         :param shaping: Per-step reward shaping of the fitness (``shaped_returns``); ``None`` for none.
         :param max_episode_steps: End an episode that reaches this many steps as a time limit would (see
             :func:`~sb3_es.evaluation.time_limit.end_capped_episodes`); ``None``: the env's own limit only.
+        :param reset_seeds: Reset seed of each candidate's episodes ``(n_candidates, n_episodes)`` (see
+            :class:`Generation`); ``None``: the slots' own random sequences.
         :return: The results.
         """
-        generation = Generation(as_network(network), population, center, n_episodes, seed, shaping, max_episode_steps)
+        generation = Generation(
+            as_network(network), population, center, n_episodes, seed, shaping, max_episode_steps, reset_seeds
+        )
         return self._evaluate(generation, step_hook)
 
     @abstractmethod

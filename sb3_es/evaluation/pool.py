@@ -49,7 +49,7 @@ class WorkerPool(ABC):
 
     @abstractmethod
     def submit(
-        self, k: int, handle: Any, candidates: np.ndarray, seed: int, token: int | None, table: SharedNoiseTable | None
+        self, k: int, handle: Any, jobs: np.ndarray, seed: int, token: int | None, table: SharedNoiseTable | None
     ) -> None:
         """
         Start worker ``k`` on a share (sending it the noise table first if it lacks it).

@@ -51,16 +51,16 @@ def worker_main(conn: Connection, config: bytes, stop: Any, tables: list[SharedN
 
     def serve(runner: ShareRunner, kind: str, args: Any) -> None:
         if kind == "run":
-            payload, candidates, seed, token = args
+            payload, jobs, seed, token = args
             payload = cloudpickle.loads(payload)
             if token is None:
-                reply("result", runner.run(payload, candidates, seed))
+                reply("result", runner.run(payload, jobs, seed))
                 return
 
             def share_done() -> None:
                 conn.send(("done", token))
 
-            reply("result", runner.run(payload, candidates, seed, share_done, lambda: stop.value != token))
+            reply("result", runner.run(payload, jobs, seed, share_done, lambda: stop.value != token))
         elif kind == "table":
             runner.noise_tables[args.key] = args.noise
         elif kind == "call":

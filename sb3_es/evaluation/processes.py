@@ -145,7 +145,7 @@ class ProcessPool(WorkerPool):
             raise WorkerDied(f"worker process {self.processes[k].pid} is gone ({type(e).__name__})") from e
 
     def submit(
-        self, k: int, handle: Any, candidates: np.ndarray, seed: int, token: int | None, table: SharedNoiseTable | None
+        self, k: int, handle: Any, jobs: np.ndarray, seed: int, token: int | None, table: SharedNoiseTable | None
     ) -> None:
         if table is not None:
             self._known_tables[table.key] = table
@@ -153,7 +153,7 @@ class ProcessPool(WorkerPool):
                 self._send(k, ("table", table))  # pickled as its size and seed: rebuilt in the worker
                 self._tables[k].add(table.key)
         self._inbox.pop(k, None)
-        self._send(k, ("run", (handle, candidates, seed, token)))
+        self._send(k, ("run", (handle, jobs, seed, token)))
 
     def wait_share_done(self, ks: Sequence[int], timeout: float | None) -> tuple[int, WorkerDied | None]:
         deadline = None if timeout is None else time.monotonic() + timeout

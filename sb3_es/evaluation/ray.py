@@ -7,10 +7,11 @@ generation's data and signals, and turns a dead actor into a :class:`~sb3_es.eva
 Ray's lifetime and the actor pools that evaluators share are in :mod:`~sb3_es.evaluation.ray_session`.
 
 Per generation the driver puts the generation's data (network spec, center, population rows or noise-table
-offsets) once in the object store and sends each actor its candidates' indices and a seed; each actor sends back
-its share's results, its observation statistics and its vec steps' ``dones`` and ``rewards`` (what crosses the wire,
-with sizes: ``docs/guide/ray.md``). This module imports without Ray; Ray is imported when a :class:`RayEvaluator`
-is created. (About 300 lines: the actor pool and the evaluator are documented for users who run Ray clusters.)
+offsets, reset seeds) once in the object store and sends each actor its jobs' indices (candidate and episode)
+and a seed; each actor sends back its share's results, its observation statistics and its vec steps' ``dones``
+and ``rewards`` (what crosses the wire, with sizes: ``docs/guide/ray.md``). This module imports without Ray;
+Ray is imported when a :class:`RayEvaluator` is created. (About 300 lines: the actor pool and the evaluator are
+documented for users who run Ray clusters.)
 """
 
 from __future__ import annotations
@@ -149,7 +150,7 @@ class RayActorPool(WorkerPool):
         return import_ray().put(payload)
 
     def submit(
-        self, k: int, handle: Any, candidates: np.ndarray, seed: int, token: int | None, table: SharedNoiseTable | None
+        self, k: int, handle: Any, jobs: np.ndarray, seed: int, token: int | None, table: SharedNoiseTable | None
     ) -> None:
         from ray.exceptions import RayActorError
 
@@ -161,7 +162,7 @@ class RayActorPool(WorkerPool):
                     self._noise_refs[table.key] = ray.put(table.noise)
                 actor.set_noise_table.remote(table.key, self._noise_refs[table.key])
                 self._tables[k].add(table.key)
-            self._eval_refs[k] = actor.evaluate.remote(handle, candidates, seed, token)
+            self._eval_refs[k] = actor.evaluate.remote(handle, jobs, seed, token)
             if token is not None:
                 self._done_refs[k] = actor.jobs_done.options(concurrency_group="signal").remote(token)
         except RayActorError as e:

@@ -59,7 +59,7 @@ class RayWorker:
         self.runner.noise_tables[tuple(key)] = noise  # type: ignore[index]
 
     def evaluate(
-        self, payload: dict[str, Any], candidates: np.ndarray, seed: int, token: int | None = None
+        self, payload: dict[str, Any], jobs: np.ndarray, seed: int, token: int | None = None
     ) -> dict[str, Any]:
         """
         Run a share (see :meth:`~sb3_es.evaluation.worker.ShareRunner.run`).
@@ -68,9 +68,9 @@ class RayWorker:
             :meth:`jobs_done` and keeps running the center policy in all slots until :meth:`stop` is called.
         """
         if token is None:
-            return self.runner.run(payload, candidates, seed)
+            return self.runner.run(payload, jobs, seed)
         share_done, stop = self._signal(token)
-        return self.runner.run(payload, candidates, seed, share_done.set, lambda: not stop.is_set())
+        return self.runner.run(payload, jobs, seed, share_done.set, lambda: not stop.is_set())
 
     def call(self, fn: Callable[[VecEnv], Any]) -> Any:
         """:return: ``fn(vec_env)``, run in the actor."""

@@ -216,6 +216,9 @@ class ShardedEvaluator(PopulationEvaluator, ABC):
             "noise": None,
             "shaping": generation.shaping,
             "max_episode_steps": generation.max_episode_steps,
+            "n_candidates": n_candidates,
+            # Reset seed of job j (None: the slots' own sequences).
+            "reset_seeds": None if generation.reset_seeds is None else np.asarray(generation.reset_seeds).T.ravel(),
         }
         table = None
         if isinstance(population, NoiseTablePopulation):
@@ -237,7 +240,7 @@ class ShardedEvaluator(PopulationEvaluator, ABC):
             while True:
                 try:
                     seed_k = int(seed) + k * pool.envs_per_worker
-                    pool.submit(k, handle, shares[k] % n_candidates, seed_k, token if lingering else None, table)
+                    pool.submit(k, handle, shares[k], seed_k, token if lingering else None, table)
                     return
                 except WorkerDied as e:  # died before its share was sent
                     replace(k, e)

@@ -6,7 +6,9 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
-from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
+from stable_baselines3.common.vec_env import VecEnv
+
+from sb3_es.evaluation.slot_reset import can_reset_slots, reset_slot
 
 
 def env_time_limit(env: VecEnv) -> int | None:
@@ -66,23 +68,14 @@ def end_capped_episodes(
     slots = np.flatnonzero((lengths >= max_episode_steps) & ~np.asarray(dones, dtype=bool))
     if len(slots) == 0:
         return
-    if isinstance(env, VecEnvWrapper):
+    if not can_reset_slots(env):
         raise RuntimeError(
             f"An episode reached max_episode_steps={max_episode_steps} steps without ending, and the env's episodes "
             f"cannot be cut one slot at a time through {type(env).__name__} (the VecEnv wrapper would not see the "
             "reset). Give each env a time limit before wrapping the VecEnv, e.g. make_vec_env(env_id, "
             "wrapper_class=gymnasium.wrappers.TimeLimit, wrapper_kwargs=dict(max_episode_steps=1000))."
         )
-    resets = env.env_method("reset", indices=slots.tolist())
-    for slot, (first_obs, _) in zip(slots.tolist(), resets):
-        terminal: Any
-        if isinstance(new_obs, dict):
-            terminal = {key: np.array(value[slot]) for key, value in new_obs.items()}
-            for key, value in new_obs.items():
-                value[slot] = first_obs[key]
-        else:
-            terminal = np.array(new_obs[slot])
-            new_obs[slot] = first_obs
+    for slot in slots.tolist():
+        infos[slot]["terminal_observation"] = reset_slot(env, slot, new_obs)
         dones[slot] = True
         infos[slot]["TimeLimit.truncated"] = True
-        infos[slot]["terminal_observation"] = terminal

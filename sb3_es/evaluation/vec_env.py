@@ -9,6 +9,7 @@ import numpy as np
 from stable_baselines3.common.vec_env import VecEnv
 
 from sb3_es.evaluation.base import Generation, PopulationEvaluator, PopulationResult, StepHook
+from sb3_es.evaluation.slot_reset import can_reset_slots, reset_slot
 from sb3_es.evaluation.time_limit import end_capped_episodes
 
 #: Observations gathered before they are added to the observation statistics.
@@ -24,7 +25,9 @@ class VecEnvEvaluator(PopulationEvaluator):
     a job at the end of the generation run the center policy, whose completed episodes are reported
     as a free evaluation of the mean (``n_steps`` counts their steps too). At the start of each
     generation the VecEnv is re-seeded and reset, so a generation's outcome depends only on the seed
-    and the parameters.
+    and the parameters. With the generation's ``reset_seeds``, each candidate episode starts with its slot
+    reset with that episode's seed (common random numbers; not through a ``VecEnvWrapper``, which would not see
+    the reset).
 
     :param env: The vectorized environment.
     """
@@ -51,6 +54,14 @@ class VecEnvEvaluator(PopulationEvaluator):
         network = generation.network  # observation statistics frozen for the generation
         shaping = generation.shaping
         env = self.env
+        reset_seeds = generation.reset_seeds
+        if reset_seeds is not None and not can_reset_slots(env):
+            raise ValueError(
+                f"Common reset seeds (common_seeds=True) reset each candidate's episode on its own, which cannot be "
+                f"done through {type(env).__name__} (the VecEnv wrapper would not see the reset): evaluate on a VecEnv "
+                "without VecEnv wrappers (normalize observations with the policy's normalize_observations instead of "
+                "VecNormalize), or set common_seeds=False."
+            )
         n_envs = env.num_envs
         result = generation.empty_result()
         returns, lengths, shaped_returns = result.returns, result.lengths, result.shaped_returns
@@ -71,6 +82,12 @@ class VecEnvEvaluator(PopulationEvaluator):
             active[slot] = job is not None
             slot_params[slot] = params[job[0]] if job is not None else center_params
 
+        def start_episode(slot: int) -> None:
+            # After assign(): a candidate episode with a reset seed starts from that seed's state.
+            job = slot_job[slot]
+            if reset_seeds is not None and job is not None:
+                reset_slot(env, slot, obs, reset_seeds[job])  # type: ignore[arg-type]
+
         for slot in range(n_envs):
             assign(slot)
         ep_return = np.zeros(n_envs)
@@ -78,6 +95,8 @@ class VecEnvEvaluator(PopulationEvaluator):
         ep_shaped = np.zeros(n_envs)
         env.seed(generation.seed)
         obs = env.reset()
+        for slot in range(n_envs):
+            start_episode(slot)
         # The candidates' observations, added to the statistics a chunk at a time (an update per vec step would cost
         # about as much as the forward pass).
         obs_chunk = np.empty((max(OBS_CHUNK_ROWS, n_envs), network.obs_dim))
@@ -119,6 +138,7 @@ class VecEnvEvaluator(PopulationEvaluator):
                 ep_length[slot] = 0
                 ep_shaped[slot] = 0.0
                 assign(slot)
+                start_episode(slot)
             if step_hook is not None and not step_hook(n_envs, infos, dones, rewards, obs, actions):
                 result.stopped = remaining > 0
                 break

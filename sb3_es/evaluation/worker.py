@@ -125,17 +125,19 @@ class ShareRunner:
     def run(
         self,
         payload: dict[str, Any],
-        candidates: np.ndarray,
+        jobs: np.ndarray,
         seed: int,
         share_done: Callable[[], None] | None = None,
         keep_lingering: Callable[[], bool] | None = None,
     ) -> dict[str, Any]:
         """
-        Evaluate one episode per entry of ``candidates`` (indices into the generation's population).
+        Run the (candidate, episode) jobs of this share, one episode each.
 
         :param payload: The generation's data: ``network``, ``center``, ``population`` (rows) or ``noise``
-            (table key, offsets, scales), ``shaping``, ``max_episode_steps``.
-        :param candidates: The candidates of this share.
+            (table key, offsets, scales), ``shaping``, ``max_episode_steps``, ``n_candidates``, ``reset_seeds``
+            (the reset seed of each job, or ``None``).
+        :param jobs: The jobs of this share: job ``j`` is episode ``j // n_candidates`` of candidate
+            ``j % n_candidates``.
         :param seed: Env seed of this share.
         :param share_done: If given, the worker lingers: called once when the share is done (also on an error),
             after which every slot runs the center policy while ``keep_lingering()`` returns True.
@@ -146,6 +148,8 @@ class ShareRunner:
         network: NetworkSpec = payload["network"]
         self._check(network)
         center = payload["center"]
+        candidates = jobs % payload["n_candidates"]
+        reset_seeds = None if payload["reset_seeds"] is None else payload["reset_seeds"][jobs][:, None]
         if payload["population"] is not None:
             rows = payload["population"][candidates]
         else:
@@ -176,7 +180,9 @@ class ShareRunner:
 
         start = time.perf_counter()
         try:
-            generation = Generation(network, rows, center, 1, seed, payload["shaping"], payload["max_episode_steps"])
+            generation = Generation(
+                network, rows, center, 1, seed, payload["shaping"], payload["max_episode_steps"], reset_seeds
+            )
             result = self.engine.run(generation, record, linger)
         finally:
             if share_done is not None and not linger_start:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from sb3_es.strategies.base import Population, Strategy, check_positive_number
+from sb3_es.strategies.base import Population, Strategy, check_positive_number, mirrored_groups
 from sb3_es.strategies.noise import NoiseTablePopulation, SharedNoiseTable
 
 
@@ -60,6 +60,10 @@ class ARSStrategy(Strategy):
     def population_size(self) -> int:
         """:return: ``2 * n_delta``."""
         return 2 * self.n_delta
+
+    def seed_groups(self, n_candidates: int) -> np.ndarray:
+        """:return: The two candidates of each mirrored pair share their reset seeds."""
+        return mirrored_groups(n_candidates)
 
     def _ask(self) -> Population:
         if self.noise_table is not None:

@@ -93,6 +93,16 @@ class Strategy(ABC):
         :return: Scalars worth logging.
         """
 
+    def seed_groups(self, n_candidates: int) -> np.ndarray:
+        """
+        Which candidates start their episodes from the same states under common random numbers (the algorithms'
+        ``common_seeds``): candidates the update compares with each other. Default: one group, the whole population.
+
+        :param n_candidates: Size of the population asked.
+        :return: The group of each candidate, ``(n_candidates,)`` integers from 0.
+        """
+        return np.zeros(n_candidates, dtype=np.int64)
+
     def check_settings(self) -> None:  # noqa: B027  (optional hook: most strategies have settings to check)
         """
         Raise a clear ``ValueError`` for settings (attributes such as ``population_size``) that the strategy cannot
@@ -132,6 +142,16 @@ class Strategy(ABC):
         state.setdefault("best_fitness", -np.inf)
         state.setdefault("_asked", None)
         self.__dict__.update(state)
+
+
+def mirrored_groups(n_candidates: int) -> np.ndarray:
+    """
+    :param n_candidates: Size of a population laid out as ``center + d_1 .. center + d_k``, then
+        ``center - d_1 .. center - d_k``.
+    :return: The seed groups of its mirrored pairs (``i`` and ``i + k`` in group ``i``), as estool gives both
+        members of an antithetic pair the same env seed.
+    """
+    return np.tile(np.arange(n_candidates // 2, dtype=np.int64), 2)
 
 
 def check_positive_number(name: str, value: float) -> None:

@@ -6,7 +6,7 @@ from typing import Any
 
 import numpy as np
 
-from sb3_es.strategies.base import Population, check_positive_number
+from sb3_es.strategies.base import Population, check_positive_number, mirrored_groups
 from sb3_es.strategies.fitness import FitnessShaping, centered_ranks, shape_fitness
 from sb3_es.strategies.noise import NoiseTablePopulation, SharedNoiseTable
 from sb3_es.strategies.optimizers import GradientStrategy, OptimizerName
@@ -105,6 +105,10 @@ class OpenESStrategy(GradientStrategy):
             if not 0 < rate <= 1:
                 raise ValueError(f"{name}={rate}: it must be in (0, 1].")
         shape_fitness(np.zeros(2), self.fitness_shaping)  # validates the name
+
+    def seed_groups(self, n_candidates: int) -> np.ndarray:
+        """:return: Mirrored pairs share their reset seeds (the whole population without antithetic sampling)."""
+        return mirrored_groups(n_candidates) if self.antithetic else super().seed_groups(n_candidates)
 
     def _ask(self) -> Population:
         half = self.population_size // 2 if self.antithetic else self.population_size

@@ -6,7 +6,7 @@ from typing import Any
 
 import numpy as np
 
-from sb3_es.strategies.base import check_positive_number
+from sb3_es.strategies.base import check_positive_number, mirrored_groups
 from sb3_es.strategies.fitness import FitnessShaping, shape_fitness
 from sb3_es.strategies.optimizers import GradientStrategy, OptimizerName
 
@@ -102,6 +102,10 @@ class PGPEStrategy(GradientStrategy):
     def _bound_stdev(self) -> None:
         if self.max_stdev is not None:
             self.stdev = np.minimum(self.stdev, self.max_stdev)
+
+    def seed_groups(self, n_candidates: int) -> np.ndarray:
+        """:return: The two candidates of each mirrored pair share their reset seeds."""
+        return mirrored_groups(n_candidates)
 
     def _ask(self) -> np.ndarray:
         self._bound_stdev()  # a max_stdev set since the last update (load()) applies from this generation on

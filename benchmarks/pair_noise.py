@@ -1,0 +1,71 @@
+"""
+How much of a mirrored pair's return difference comes from the starting states: the case for ``common_seeds``.
+
+Around the center of a saved model, ``--pairs`` mirrored candidates ``center +/- sigma * eps`` (``sigma``: the
+model's PGPE standard deviations, or ``--sigma``) each run ``--episodes`` episodes with the evaluator's reset
+seeds: both members of a pair from the same starting states (common random numbers, as ``common_seeds=True``
+does), then from different ones (every episode its own seed). For each pair, the variance over episodes of the
+difference ``R(center + d) - R(center - d)`` is what the strategy's update sees as noise. Example (the shipped
+walker-walk model)::
+
+    python benchmarks/pair_noise.py benchmarks/trained/pgpe_walker_walk_mlp_ln.zip dm_control/walker-walk-v0
+
+Prints the two variances, their ratio and the correlation of the pair's returns; writes nothing.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import gymnasium as gym
+import numpy as np
+import shimmy
+from common import system_info
+from stable_baselines3.common.env_util import make_vec_env
+
+from sb3_es import PGPE
+from sb3_es.evaluation import VecEnvEvaluator
+
+gym.register_envs(shimmy)  # the dm_control/ ids
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("model", help="a saved PGPE model (zip)")
+    parser.add_argument("env", help="env id")
+    parser.add_argument("--pairs", type=int, default=16, help="mirrored pairs (default 16)")
+    parser.add_argument("--episodes", type=int, default=10, help="episodes per candidate (default 10)")
+    parser.add_argument("--sigma", type=float, default=None, help="perturbation scale (default: the model's stdevs)")
+    parser.add_argument("--n-envs", type=int, default=8, help="env slots (default 8)")
+    parser.add_argument("--seed", type=int, default=0)
+    args = parser.parse_args()
+
+    model = PGPE.load(args.model, device="cpu")
+    center = np.asarray(model.strategy.center)
+    sigma = np.asarray(model.strategy.stdev) if args.sigma is None else args.sigma
+    rng = np.random.default_rng(args.seed)
+    directions = sigma * rng.standard_normal((args.pairs, center.size))
+    population = np.concatenate([center + directions, center - directions])
+    evaluator = VecEnvEvaluator(make_vec_env(args.env, n_envs=args.n_envs, seed=args.seed))
+    common = np.tile(1000 + np.arange(args.episodes), (2 * args.pairs, 1))  # pair members: the same states
+    separate = 1000 + np.arange(2 * args.pairs * args.episodes).reshape(2 * args.pairs, args.episodes)
+    print(f"{args.model}: {model.num_timesteps:,} steps, {center.size} parameters, mean sigma {np.mean(sigma):.4g}")
+    variances = {}
+    for name, seeds in (("common", common), ("separate", separate)):
+        start = time.perf_counter()
+        returns = evaluator.evaluate(model.policy, population, center, args.episodes, args.seed, reset_seeds=seeds)
+        plus, minus = returns.returns[: args.pairs], returns.returns[args.pairs :]
+        variances[name] = float((plus - minus).var(axis=1, ddof=1).mean())
+        correlation = np.mean([np.corrcoef(p, m)[0, 1] for p, m in zip(plus, minus)])
+        print(
+            f"{name:>8} starting states: return {returns.returns.mean():.1f} (std over episodes "
+            f"{returns.returns.std(axis=1).mean():.1f}), var of the pair difference {variances[name]:.0f}, "
+            f"correlation of the pair's returns {correlation:.2f} ({time.perf_counter() - start:.0f} s)"
+        )
+    print(f"ratio separate / common: {variances['separate'] / variances['common']:.2f}")
+    print(system_info())
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,40 @@
+"""Reset one slot of a VecEnv (optionally with a seed) and write its first observation into the step's batch."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
+
+
+def can_reset_slots(env: VecEnv) -> bool:
+    """
+    :param env: A VecEnv.
+    :return: Whether its slots can be reset one at a time (``env_method("reset")``): not through a
+        ``VecEnvWrapper`` (a ``VecNormalize`` or ``VecFrameStack`` would not see the reset).
+    """
+    return not isinstance(env, VecEnvWrapper)
+
+
+def reset_slot(env: VecEnv, slot: int, obs: np.ndarray | dict[str, np.ndarray], seed: int | None = None) -> Any:
+    """
+    Reset the env of one slot and write its first observation into ``obs`` (in place).
+
+    :param env: The VecEnv (see :func:`can_reset_slots`).
+    :param slot: The slot.
+    :param obs: The batch of observations returned by the last ``step()`` or ``reset()``.
+    :param seed: Seed of the reset (``None``: the env's own random sequence goes on).
+    :return: The slot's observation before the reset (a copy).
+    """
+    kwargs = {} if seed is None else {"seed": int(seed)}
+    first_obs, _ = env.env_method("reset", indices=[slot], **kwargs)[0]
+    previous: Any
+    if isinstance(obs, dict):
+        previous = {key: np.array(value[slot]) for key, value in obs.items()}
+        for key, value in obs.items():
+            value[slot] = first_obs[key]
+    else:
+        previous = np.array(obs[slot])
+        obs[slot] = first_obs
+    return previous
