@@ -47,7 +47,7 @@ CASES: dict[type[BaseAlgorithm], Case] = {
     CMAES: Case(dict(population_size=4), dict(max_restarts=0, n_eval_episodes=2), 4 * 2 * 200, dict(sigma=0.5)),
     PGPE: Case(
         dict(population_size=8),
-        dict(population_size=4, stdev_learning_rate=0.05, max_speed=0.1, max_stdev=0.08),
+        dict(population_size=4, stdev_learning_rate=0.05, max_speed=0.1, max_stdev=0.08, common_seeds=True),
         4 * 200,
         dict(stdev_init=0.5),
     ),
