@@ -1,8 +1,8 @@
 """
 How much of a mirrored pair's return difference comes from the starting states: the case for ``common_seeds``.
 
-Around the center of a saved model, ``--pairs`` mirrored candidates ``center +/- sigma * eps`` (``sigma``: the
-model's PGPE standard deviations, or ``--sigma``) each run ``--episodes`` episodes with the evaluator's reset
+Around the center of a saved model, ``--pairs`` mirrored candidates ``center +/- sigma * eps`` (``sigma``: a PGPE
+model's standard deviations, or ``--sigma``) each run ``--episodes`` episodes with the evaluator's reset
 seeds: both members of a pair from the same starting states (common random numbers, as ``common_seeds=True``
 does), then from different ones (every episode its own seed). For each pair, the variance over episodes of the
 difference ``R(center + d) - R(center - d)`` is what the strategy's update sees as noise. Example (the shipped
@@ -24,7 +24,7 @@ import shimmy
 from common import system_info
 from stable_baselines3.common.env_util import make_vec_env
 
-from sb3_es import PGPE
+import sb3_es
 from sb3_es.evaluation import VecEnvEvaluator
 
 gym.register_envs(shimmy)  # the dm_control/ ids
@@ -32,17 +32,20 @@ gym.register_envs(shimmy)  # the dm_control/ ids
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("model", help="a saved PGPE model (zip)")
+    parser.add_argument("model", help="a saved model (zip) of a population algorithm")
+    parser.add_argument("--algo", default="PGPE", help="its class in sb3_es (default PGPE)")
     parser.add_argument("env", help="env id")
     parser.add_argument("--pairs", type=int, default=16, help="mirrored pairs (default 16)")
     parser.add_argument("--episodes", type=int, default=10, help="episodes per candidate (default 10)")
-    parser.add_argument("--sigma", type=float, default=None, help="perturbation scale (default: the model's stdevs)")
+    parser.add_argument("--sigma", type=float, default=None, help="perturbation scale (default: a PGPE model's stdevs)")
     parser.add_argument("--n-envs", type=int, default=8, help="env slots (default 8)")
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
 
-    model = PGPE.load(args.model, device="cpu")
+    model = getattr(sb3_es, args.algo).load(args.model, device="cpu")
     center = np.asarray(model.strategy.center)
+    if args.sigma is None and not isinstance(model, sb3_es.PGPE):
+        parser.error(f"--sigma is needed for a {args.algo} model (only PGPE keeps a standard deviation per parameter)")
     sigma = np.asarray(model.strategy.stdev) if args.sigma is None else args.sigma
     rng = np.random.default_rng(args.seed)
     directions = sigma * rng.standard_normal((args.pairs, center.size))
