@@ -18,13 +18,11 @@ import gymnasium as gym
 import numpy as np
 import shimmy
 from stable_baselines3.common.base_class import BaseAlgorithm
+from walker_shaping import STAND_HEIGHT, walker_physics
 
 import sb3_es
 
 gym.register_envs(shimmy)  # the dm_control/ ids
-
-#: dm_control's walker: the torso height from which ``stand`` pays in full.
-STAND_HEIGHT = 1.2
 
 
 def main() -> None:
@@ -36,7 +34,7 @@ def main() -> None:
 
     model: BaseAlgorithm = getattr(sb3_es, args.algo).load(args.model, device="cpu")
     env = gym.make("dm_control/walker-walk-v0")
-    physics = env.unwrapped._env.physics  # type: ignore[attr-defined]  # shimmy's wrapped dm_control env
+    physics = walker_physics(env)
     for episode in range(args.episodes):
         obs, _ = env.reset(seed=300 + episode)
         total, speed, height, upright = 0.0, [], [], []

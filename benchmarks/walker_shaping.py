@@ -21,6 +21,25 @@ import gymnasium as gym
 from dm_control.suite import walker
 from dm_control.utils import rewards
 
+#: dm_control's walker: the torso height from which ``standing`` pays in full.
+STAND_HEIGHT: float = walker._STAND_HEIGHT
+
+
+def walker_physics(env: gym.Env) -> Any:
+    """
+    The dm_control physics of a ``dm_control/walker-*`` env made through shimmy (torso height, speed, uprightness).
+
+    :param env: The env, wrapped or not.
+    :return: Its ``dm_control.suite.walker.Physics``.
+    """
+    physics = getattr(getattr(env.unwrapped, "_env", None), "physics", None)
+    if not hasattr(physics, "torso_height"):
+        raise ValueError(
+            f"needs a dm_control walker env made through shimmy (e.g. 'dm_control/walker-walk-v0'), got {env}: "
+            f"use it only on those envs."
+        )
+    return physics
+
 
 class StandBonus(gym.Wrapper, gym.utils.RecordConstructorArgs):
     """
@@ -34,19 +53,14 @@ class StandBonus(gym.Wrapper, gym.utils.RecordConstructorArgs):
         gym.utils.RecordConstructorArgs.__init__(self, weight=weight)
         gym.Wrapper.__init__(self, env)
         try:
-            self._physics = env.unwrapped._env.physics  # type: ignore[attr-defined]  # shimmy's dm_control env
-            self._physics.torso_height()
-        except AttributeError as error:
-            raise ValueError(
-                f"StandBonus needs a dm_control walker env made through shimmy (e.g. 'dm_control/walker-walk-v0'), "
-                f"got {env}: use it only on those envs."
-            ) from error
+            self._physics = walker_physics(env)
+        except ValueError as error:
+            raise ValueError(f"StandBonus {error}") from None
         self.weight = weight
 
     def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
         obs, reward, terminated, truncated, info = self.env.step(action)
-        stand_height = walker._STAND_HEIGHT
         standing = rewards.tolerance(
-            self._physics.torso_height(), bounds=(stand_height, float("inf")), margin=stand_height / 2
+            self._physics.torso_height(), bounds=(STAND_HEIGHT, float("inf")), margin=STAND_HEIGHT / 2
         )
         return obs, float(reward) + self.weight * float(standing), terminated, truncated, info
