@@ -81,12 +81,57 @@ from stable_baselines3.common.vec_env import VecEnv
 try:
     import rl_zoo3
     from rl_zoo3.exp_manager import ExperimentManager
+    from rl_zoo3.utils import get_wrapper_class
 
     from sb3_es.zoo import UsageError, check_algo, default_conf_file, register, sb3_es_algos
 except ImportError as e:  # pragma: no cover
     raise SystemExit(f"benchmarks/compare.py needs rl_zoo3: pip install 'sb3-es[zoo]' ({e})") from e
 
 DEFAULT_ALGOS = ("ars_es", "openes", "cmaes", "reinforce", "ppo", "sac")
+
+
+class TrainingWrapperManager(ExperimentManager):
+    """
+    rl-zoo's ``ExperimentManager`` whose training envs, and not its evaluation env, get one more wrapper.
+
+    rl-zoo's ``env_wrapper`` wraps both; a wrapper that changes the task itself for the search (where episodes
+    start, say) must stay out of the evaluations. It is applied first, inside the entry's ``env_wrapper``.
+    """
+
+    #: The training-only wrapper (``None``: none).
+    train_wrapper: Any = None
+
+    def create_envs(self, n_envs: int, eval_env: bool = False, no_log: bool = False) -> VecEnv:
+        if eval_env or self.train_wrapper is None:
+            return super().create_envs(n_envs, eval_env=eval_env, no_log=no_log)
+        entry_wrapper, train_wrapper = self.env_wrapper, self.train_wrapper
+        if entry_wrapper is not None:
+            self.env_wrapper = lambda env: entry_wrapper(train_wrapper(env))
+        else:
+            self.env_wrapper = train_wrapper
+        try:
+            return super().create_envs(n_envs, eval_env=eval_env, no_log=no_log)
+        finally:
+            self.env_wrapper = entry_wrapper
+
+
+def parse_train_wrapper(value: str | None) -> Any:
+    """
+    Read ``--train-wrapper``: a wrapper in rl-zoo's ``env_wrapper`` form, as YAML (``module.Class`` or
+    ``{module.Class: {key: value}}``).
+
+    :param value: The option's value (``None``: no wrapper).
+    :return: The callable that wraps an env, or ``None``.
+    """
+    if value is None:
+        return None
+    try:
+        return get_wrapper_class({"env_wrapper": yaml.safe_load(value)})
+    except (ImportError, AttributeError, AssertionError, yaml.YAMLError) as e:
+        raise SystemExit(
+            f"--train-wrapper {value!r}: {e}; give an importable wrapper class as module.Class or "
+            "'{module.Class: {key: value}}' (run from a folder where the module can be imported, e.g. PYTHONPATH=.)"
+        ) from e
 
 
 def env_slug(env_id: str) -> str:
@@ -386,6 +431,7 @@ def run_one(
     confirm_episodes: int = 0,
     eval_envs: int = 1,
     continue_from: Path | None = None,
+    train_wrapper: str | None = None,
 ) -> dict[str, Any]:
     """
     Train one (algorithm, env, seed) run through rl-zoo's ExperimentManager and record its evaluations.
@@ -408,6 +454,8 @@ def run_one(
     :param continue_from: A saved model (e.g. a run's ``last_model.zip``) to train on from, loaded by rl-zoo's
         ``--trained-agent`` with the overrides applied: its step count goes on, so evaluations keep the grid and the
         budget in steps counts from there; the wall-clock columns count this run only.
+    :param train_wrapper: A wrapper for the training envs only, in rl-zoo's ``env_wrapper`` form as YAML (see
+        :class:`TrainingWrapperManager`); the evaluations run on the env without it.
     :return: The run summary (also written to the run folder's ``summary.json``).
     """
     started = time.strftime("%Y-%m-%d %H:%M %Z")
@@ -428,7 +476,7 @@ def run_one(
         algo=algo, env=env_id, seed=seed, n_timesteps=steps or -1, conf_file=str(config), env_kwargs=None
     )
     set_random_seed(seed)
-    manager = ExperimentManager(
+    manager = TrainingWrapperManager(
         args,
         algo,
         env_id,
@@ -444,8 +492,11 @@ def run_one(
         trained_agent=str(continue_from or ""),
     )
     assert Path(manager.save_path) == folder, (manager.save_path, folder)
+    manager.train_wrapper = parse_train_wrapper(train_wrapper)
     if overrides:
         note += f"; overridden: {', '.join(f'{k}={v}' for k, v in overrides.items())}"
+    if train_wrapper is not None:
+        note += f"; training envs only: {train_wrapper}"
     setup_log = io.StringIO()
     with contextlib.redirect_stdout(setup_log if verbose == 0 else sys.stdout):
         result = manager.setup_experiment()
@@ -500,6 +551,7 @@ def run_one(
         "eval_episodes": eval_episodes,
         "eval_envs": eval_envs,
         "continued_from": {"model": str(continue_from), "env_steps": offset} if continue_from is not None else None,
+        "train_wrapper": train_wrapper,
         "confirm_episodes": recorder.confirm_episodes if stop_at is not None else 0,
         "confirmations": recorder.confirmations,
         "hyperparams_source": note,
@@ -825,6 +877,12 @@ def main(argv: list[str] | None = None) -> Path:
         default=None,
         help="a saved model (e.g. a run's last_model.zip) to train on from; one algorithm, env and seed only",
     )
+    parser.add_argument(
+        "--train-wrapper",
+        default=None,
+        help="a wrapper for the training envs only, not the evaluations, as rl-zoo's env_wrapper in YAML: "
+        "module.Class or '{module.Class: {key: value}}'",
+    )
     parser.add_argument("--skip-existing", action="store_true", help="skip runs that already have a summary.json")
     parser.add_argument("--keep-going", action="store_true", help="record a failed run and go on with the others")
     parser.add_argument("--report-only", action="store_true", help="only redraw plots and table from existing runs")
@@ -892,6 +950,7 @@ def main(argv: list[str] | None = None) -> Path:
                     confirm_episodes=args.confirm_episodes,
                     eval_envs=args.eval_envs,
                     continue_from=args.continue_from,
+                    train_wrapper=args.train_wrapper,
                 )
             except Exception:
                 if not args.keep_going:

@@ -7,7 +7,9 @@ shipped PGPE model)::
 
     python benchmarks/walker_gait.py benchmarks/trained/pgpe_walker_walk_mlp_ln.zip --episodes 5
 
-Prints one line per episode (deterministic policy, reset seeds 300, 301, ...).
+Prints one line per episode (deterministic policy, reset seeds 300, 301, ...), then the same figures and the reward
+per step over all episodes by phase of the episode (the first 100 steps, the next 100, the rest), which shows how
+much of the return getting up from dm_control's random initial pose costs.
 """
 
 from __future__ import annotations
@@ -35,22 +37,46 @@ def main() -> None:
     model: BaseAlgorithm = getattr(sb3_es, args.algo).load(args.model, device="cpu")
     env = gym.make("dm_control/walker-walk-v0")
     physics = walker_physics(env)
+    per_step: list[np.ndarray] = []  # one (steps, 4) array per episode: reward, speed, height, uprightness
     for episode in range(args.episodes):
         obs, _ = env.reset(seed=300 + episode)
-        total, speed, height, upright = 0.0, [], [], []
+        rewards: list[float] = []
+        speed, height, upright = [], [], []
         done = False
         while not done:
             action, _ = model.predict({key: np.asarray(value)[None] for key, value in obs.items()}, deterministic=True)
             obs, reward, terminated, truncated, _ = env.step(action[0])
-            total += float(reward)
+            rewards.append(float(reward))
             done = terminated or truncated
             speed.append(physics.horizontal_velocity())
             height.append(physics.torso_height())
             upright.append(physics.torso_upright())
         h = np.array(height)
+        per_step.append(np.array([rewards, speed, height, upright]).T)
+        total = sum(rewards)
         print(
             f"episode {episode}: return {total:.1f}, speed {np.mean(speed):.2f} m/s, torso height {h.mean():.2f} m "
             f"(below {STAND_HEIGHT} m in {np.mean(h < STAND_HEIGHT):.0%} of the steps), upright {np.mean(upright):.2f}"
+        )
+
+    print_phases(per_step)
+
+
+def print_phases(per_step: list[np.ndarray], bounds: tuple[int, ...] = (0, 100, 200)) -> None:
+    """Print the mean reward per step, speed, torso height and uprightness over all episodes, by phase.
+
+    :param per_step: One array per episode, a row per step: reward, speed, torso height, uprightness.
+    :param bounds: The first step of each phase; the last phase runs to the end of the episode.
+    """
+    for start, stop in zip(bounds, (*bounds[1:], None)):
+        rows = np.concatenate([steps[start:stop] for steps in per_step])
+        if len(rows) == 0:
+            continue
+        reward, speed, height, upright = rows.mean(axis=0)
+        label = f"steps {start}-{'end' if stop is None else stop - 1}"
+        print(
+            f"{label}: reward per step {reward:.3f}, speed {speed:.2f} m/s, torso height {height:.2f} m, "
+            f"upright {upright:.2f}"
         )
 
 
