@@ -598,6 +598,41 @@ def test_compare_confirms_a_threshold_before_stopping(tmp_path: Path) -> None:
         compare.main(["--algos", "ars_es", "--steps", "10", "--confirm-episodes", "3", "--out", str(out)])
 
 
+def test_compare_train_wrapper_wraps_the_training_envs_only(tmp_path: Path) -> None:
+    compare = load_script("compare")
+    register()
+    args = argparse.Namespace(algo="ars_es", env="Pendulum-v1", env_kwargs=None)
+    zoo_manager = compare.TrainingWrapperManager(
+        args,
+        "ars_es",
+        "Pendulum-v1",
+        str(tmp_path),
+        eval_freq=-1,
+        seed=0,
+        log_interval=-1,
+        verbose=0,
+        config=str(default_conf_file("ars_es")),
+    )
+    zoo_manager.train_wrapper = compare.parse_train_wrapper(
+        "{gymnasium.wrappers.ClipReward: {min_reward: -0.5, max_reward: 0.5}}"
+    )
+    result = zoo_manager.setup_experiment()
+    assert result is not None
+    train_env, eval_env = result[0].get_env(), zoo_manager.create_envs(1, eval_env=True)
+    assert train_env is not None
+    # the same start state and action: the training env's reward is clipped, the evaluation env's is Pendulum's own
+    train_env.seed(3)
+    eval_env.seed(3)
+    train_env.reset()
+    eval_env.reset()
+    action = np.array([[2.0]], dtype=np.float32)
+    (raw,) = eval_env.step(action)[1]
+    trained = train_env.step(np.repeat(action, train_env.num_envs, axis=0))[1][0]
+    assert raw < -0.5 and trained == pytest.approx(-0.5)
+    with pytest.raises(SystemExit, match="give an importable wrapper class"):
+        compare.parse_train_wrapper("no_such_module.Wrapper")
+
+
 @pytest.mark.parametrize("key", [key for key in KEYS if issubclass(ALGOS[key], PopulationAlgorithm)])
 def test_budget_overshoot_is_at_most_one_generation(key: str) -> None:
     class Generations(BaseCallback):
