@@ -9,7 +9,8 @@ shipped PGPE model)::
 
 Prints one line per episode (deterministic policy, reset seeds 300, 301, ...), then the same figures and the reward
 per step over all episodes by phase of the episode (the first 100 steps, the next 100, the rest), which shows how
-much of the return getting up from dm_control's random initial pose costs.
+much of the return getting up from dm_control's random initial pose costs. ``--upright-starts`` starts every
+episode upright instead (``walker_shaping.UprightStart``).
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ import gymnasium as gym
 import numpy as np
 import shimmy
 from stable_baselines3.common.base_class import BaseAlgorithm
-from walker_shaping import STAND_HEIGHT, walker_physics
+from walker_shaping import STAND_HEIGHT, UprightStart, walker_physics
 
 import sb3_es
 
@@ -32,10 +33,15 @@ def main() -> None:
     parser.add_argument("model", help="a saved sb3-es model (zip) trained on dm_control/walker-walk-v0")
     parser.add_argument("--algo", default="PGPE", help="its algorithm class in sb3_es (default PGPE)")
     parser.add_argument("--episodes", type=int, default=5)
+    parser.add_argument(
+        "--upright-starts", action="store_true", help="start every episode upright (walker_shaping.UprightStart)"
+    )
     args = parser.parse_args()
 
     model: BaseAlgorithm = getattr(sb3_es, args.algo).load(args.model, device="cpu")
     env = gym.make("dm_control/walker-walk-v0")
+    if args.upright_starts:
+        env = UprightStart(env, probability=1.0)
     physics = walker_physics(env)
     per_step: list[np.ndarray] = []  # one (steps, 4) array per episode: reward, speed, height, uprightness
     for episode in range(args.episodes):
