@@ -57,12 +57,13 @@ def main() -> None:
             speed.append(physics.horizontal_velocity())
             height.append(physics.torso_height())
             upright.append(physics.torso_upright())
-        h = np.array(height)
-        per_step.append(np.array([rewards, speed, height, upright]).T)
-        total = sum(rewards)
+        steps = np.array([rewards, speed, height, upright]).T
+        per_step.append(steps)
+        h = steps[:, 2]
         print(
-            f"episode {episode}: return {total:.1f}, speed {np.mean(speed):.2f} m/s, torso height {h.mean():.2f} m "
-            f"(below {STAND_HEIGHT} m in {np.mean(h < STAND_HEIGHT):.0%} of the steps), upright {np.mean(upright):.2f}"
+            f"episode {episode}: return {steps[:, 0].sum():.1f}, speed {steps[:, 1].mean():.2f} m/s, torso height "
+            f"{h.mean():.2f} m (below {STAND_HEIGHT} m in {np.mean(h < STAND_HEIGHT):.0%} of the steps), upright "
+            f"{steps[:, 3].mean():.2f}"
         )
 
     print_phases(per_step)

@@ -102,12 +102,20 @@ SMALL = {
 }
 
 
-def manager(algo: str, env_id: str, folder: Path, n_timesteps: int = 0, **kwargs: Any) -> ExperimentManager:
-    """rl-zoo's own ExperimentManager, as rl_zoo3.train builds it, with the packaged file of an sb3-es algorithm."""
+def manager(
+    algo: str,
+    env_id: str,
+    folder: Path,
+    n_timesteps: int = 0,
+    manager_cls: type[ExperimentManager] = ExperimentManager,
+    **kwargs: Any,
+) -> ExperimentManager:
+    """rl-zoo's own ExperimentManager (or ``manager_cls``), as rl_zoo3.train builds it, with the packaged file of an
+    sb3-es algorithm."""
     register()
     args = argparse.Namespace(algo=algo, env=env_id, env_kwargs=None)
     kwargs.setdefault("config", str(default_conf_file(algo)))
-    return ExperimentManager(
+    return manager_cls(
         args,
         algo,
         env_id,
@@ -600,19 +608,7 @@ def test_compare_confirms_a_threshold_before_stopping(tmp_path: Path) -> None:
 
 def test_compare_train_wrapper_wraps_the_training_envs_only(tmp_path: Path) -> None:
     compare = load_script("compare")
-    register()
-    args = argparse.Namespace(algo="ars_es", env="Pendulum-v1", env_kwargs=None)
-    zoo_manager = compare.TrainingWrapperManager(
-        args,
-        "ars_es",
-        "Pendulum-v1",
-        str(tmp_path),
-        eval_freq=-1,
-        seed=0,
-        log_interval=-1,
-        verbose=0,
-        config=str(default_conf_file("ars_es")),
-    )
+    zoo_manager = manager("ars_es", "Pendulum-v1", tmp_path, manager_cls=compare.TrainingWrapperManager)
     zoo_manager.train_wrapper = compare.parse_train_wrapper(
         "{gymnasium.wrappers.ClipReward: {min_reward: -0.5, max_reward: 0.5}}"
     )
