@@ -123,7 +123,7 @@ def run_entry(
         "--steps",
         str(steps),
         "--eval-freq",
-        str(EVAL_FREQ.get(env_id, DEFAULT_EVAL_FREQ)),
+        str(args.eval_freq or EVAL_FREQ.get(env_id, DEFAULT_EVAL_FREQ)),
         "--eval-episodes",
         str(args.eval_episodes),
         "--eval-envs",
@@ -279,6 +279,9 @@ def main(argv: list[str] | None = None) -> str:
     parser.add_argument("--max-seconds", type=float, default=None, help="training wall-clock cap per run")
     parser.add_argument("--eval-episodes", type=int, default=10)
     parser.add_argument("--eval-envs", type=int, default=1, help="envs the evaluation episodes run on side by side")
+    parser.add_argument(
+        "--eval-freq", type=int, default=None, help="env steps between evaluations (default: chosen per env)"
+    )
     parser.add_argument("--threshold", nargs="*", default=[], help="ENV_ID=RETURN, replacing the defaults")
     parser.add_argument("--out", default="results/verify", help="output folder (one compare.py folder per entry)")
     parser.add_argument("--tag", default="", help="suffix of the entries' output folders (a re-run after a fix)")
