@@ -13,7 +13,8 @@ Examples::
     PYTHONPATH=. python benchmarks/verify_configs.py --envs CartPole-v1 Pendulum-v1 --out results/verify --table-only
 
 Thresholds: ``--threshold ENV=X`` if given, else :data:`THRESHOLDS` (stated here where Gymnasium has none),
-else the env's ``spec.reward_threshold``. Each run's outputs are compare.py's, under
+else the env's ``spec.reward_threshold``. Evaluations: every :func:`eval_freq_for` env steps, or ``--eval-freq N``
+(stated in the YAML comment's command when it differs). Each run's outputs are compare.py's, under
 ``<out>/<algo>/<env>/`` (``results.md``, ``logs/<algo>/<env>_1_seed<s>/summary.json`` and ``evaluations.npz``).
 """
 
@@ -56,6 +57,12 @@ EVAL_FREQ = {"CartPole-v1": 5_000, "LunarLander-v3": 50_000, "LunarLanderContinu
 # 1,000-step episodes, millions of steps
 EVAL_FREQ.update(dict.fromkeys([*PAPER_THRESHOLDS, "dm_control/cheetah-run-v0"], 100_000))
 DEFAULT_EVAL_FREQ = 20_000
+
+
+def eval_freq_for(env_id: str) -> int:
+    """:return: The env steps between evaluations of an env's runs unless ``--eval-freq`` is given."""
+    return EVAL_FREQ.get(env_id, DEFAULT_EVAL_FREQ)
+
 
 gym.register_envs(shimmy)  # the dm_control/ ids, for their spec thresholds
 
@@ -123,7 +130,7 @@ def run_entry(
         "--steps",
         str(steps),
         "--eval-freq",
-        str(args.eval_freq or EVAL_FREQ.get(env_id, DEFAULT_EVAL_FREQ)),
+        str(eval_freq_for(env_id) if args.eval_freq is None else args.eval_freq),
         "--eval-episodes",
         str(args.eval_episodes),
         "--eval-envs",
@@ -254,6 +261,8 @@ def comment(algo: str, env_id: str, threshold: float | None, results: list[dict[
         command += f" --max-seconds {first['budget_seconds']:g}"
     if first["budget_steps"] < n_timesteps:
         command += f" --max-steps {first['budget_steps']}"
+    if first["eval_freq"] != eval_freq_for(env_id):
+        command += f" --eval-freq {first['eval_freq']}"
     if first["eval_envs"] != 1:
         command += f" --eval-envs {first['eval_envs']}"
     text = (

@@ -50,6 +50,18 @@ def test_comment_without_threshold_or_commit() -> None:
     assert text.splitlines()[-1].endswith("--seeds 0 --max-seconds 150 --eval-envs 5")
 
 
+def test_comment_states_an_eval_freq_other_than_the_envs_default() -> None:
+    """A run with ``--eval-freq`` is reproduced only with it; the env's default frequency is left out."""
+    script = load_script("verify_configs")
+    assert script.eval_freq_for("BipedalWalker-v3") == script.DEFAULT_EVAL_FREQ != 100_000
+    text = script.comment("simple_es", "BipedalWalker-v3", 300.0, [result(0, None)], n_timesteps=2_000_000)
+    assert "10 evaluation episodes every 100,000 steps" in " ".join(line.lstrip("# ") for line in text.splitlines())
+    assert text.splitlines()[-1].endswith("--seeds 0 --max-seconds 150 --eval-freq 100000 --eval-envs 5")
+    default = {**result(0, None), "eval_freq": script.DEFAULT_EVAL_FREQ}
+    text = script.comment("simple_es", "BipedalWalker-v3", 300.0, [default], n_timesteps=2_000_000)
+    assert "--eval-freq" not in text
+
+
 def test_threshold_of_a_dm_control_env_without_one_is_none() -> None:
     """dm_control ids are registered (by shimmy) before their spec is read; cheetah-run has no threshold."""
     threshold_for = load_script("verify_configs").threshold_for
