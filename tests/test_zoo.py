@@ -581,6 +581,22 @@ def test_compare_writes_rl_zoos_layout(tmp_path: Path, capsys: pytest.CaptureFix
     assert "Computing bootstrap CI" in capsys.readouterr().out and figure.stat().st_size > 10_000
 
 
+def test_compare_runs_sb3_contribs_ars_under_its_rl_zoo_key(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    compare = load_script("compare")
+    out = tmp_path / "cmp"
+    threads = torch.get_num_threads()
+    try:
+        compare.main(
+            ["--algos", "ars", "--envs", "Pendulum-v1", "--steps", "1000", "--eval-freq", "0", "--out", str(out)]
+        )
+    finally:
+        torch.set_num_threads(threads)
+    assert "--algos ars is sb3-contrib's ARS" in capsys.readouterr().out
+    model = rl_zoo3.ALGOS["ars"].load(out / "logs" / "ars" / "Pendulum-v1_1_seed0" / "Pendulum-v1.zip")
+    assert type(model).__module__.startswith("sb3_contrib") and model.num_timesteps >= 1000
+    assert "n_delta" in (out / "configs" / "ars-Pendulum-v1.yml").read_text()  # rl-zoo's ars.yml entry
+
+
 def test_compare_confirms_a_threshold_before_stopping(tmp_path: Path) -> None:
     compare = load_script("compare")
     out = tmp_path / "cmp"
