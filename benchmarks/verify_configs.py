@@ -57,6 +57,8 @@ EVAL_FREQ = {"CartPole-v1": 5_000, "LunarLander-v3": 50_000, "LunarLanderContinu
 # 1,000-step episodes, millions of steps
 EVAL_FREQ.update(dict.fromkeys([*PAPER_THRESHOLDS, "dm_control/cheetah-run-v0"], 100_000))
 DEFAULT_EVAL_FREQ = 20_000
+#: Evaluation episodes per evaluation unless --eval-episodes says otherwise.
+DEFAULT_EVAL_EPISODES = 10
 
 
 def eval_freq_for(env_id: str) -> int:
@@ -181,6 +183,7 @@ def seed_results(folder: Path, threshold: float | None) -> list[dict[str, Any]]:
                 "date": summary["date"],
                 "commit": summary.get("commit"),
                 "eval_freq": summary["eval_freq"],
+                "eval_episodes": summary["eval_episodes"],
                 "eval_envs": summary["eval_envs"],
                 "hardware": summary["hardware"],
             }
@@ -263,11 +266,13 @@ def comment(algo: str, env_id: str, threshold: float | None, results: list[dict[
         command += f" --max-steps {first['budget_steps']}"
     if first["eval_freq"] != eval_freq_for(env_id):
         command += f" --eval-freq {first['eval_freq']}"
+    if first["eval_episodes"] != DEFAULT_EVAL_EPISODES:
+        command += f" --eval-episodes {first['eval_episodes']}"
     if first["eval_envs"] != 1:
         command += f" --eval-envs {first['eval_envs']}"
     text = (
-        f"Measured {first['date'][:10]} ({', '.join(commits)}; {budget}; 10 evaluation episodes every "
-        f"{first['eval_freq']:,} steps): {'; '.join(outcomes)}{reached}."
+        f"Measured {first['date'][:10]} ({', '.join(commits)}; {budget}; {first['eval_episodes']} evaluation "
+        f"episodes every {first['eval_freq']:,} steps): {'; '.join(outcomes)}{reached}."
     )
     lines = ["# " + line for line in textwrap.wrap(text, 118)]
     return "\n".join([*lines, "# Command:", f"#   {command}"])
@@ -286,7 +291,7 @@ def main(argv: list[str] | None = None) -> str:
     parser.add_argument("--seeds", nargs="+", type=int, default=[0, 1])
     parser.add_argument("--max-steps", type=int, default=None, help="cap on the entry's n_timesteps")
     parser.add_argument("--max-seconds", type=float, default=None, help="training wall-clock cap per run")
-    parser.add_argument("--eval-episodes", type=int, default=10)
+    parser.add_argument("--eval-episodes", type=int, default=DEFAULT_EVAL_EPISODES)
     parser.add_argument("--eval-envs", type=int, default=1, help="envs the evaluation episodes run on side by side")
     parser.add_argument(
         "--eval-freq", type=int, default=None, help="env steps between evaluations (default: chosen per env)"

@@ -23,6 +23,7 @@ def result(seed: int, hit: int | None, commit: str | None = "abc1234") -> dict[s
         "date": "2026-11-25 01:33 UTC",
         "commit": commit,
         "eval_freq": 100_000,
+        "eval_episodes": 10,
         "eval_envs": 5,
     }
 
@@ -60,6 +61,14 @@ def test_comment_states_an_eval_freq_other_than_the_envs_default() -> None:
     default = {**result(0, None), "eval_freq": script.DEFAULT_EVAL_FREQ}
     text = script.comment("simple_es", "BipedalWalker-v3", 300.0, [default], n_timesteps=2_000_000)
     assert "--eval-freq" not in text
+
+
+def test_comment_states_the_evaluation_episodes_the_runs_used() -> None:
+    comment = load_script("verify_configs").comment
+    text = comment("ars_es", "Hopper-v5", 300.0, [{**result(0, None), "eval_episodes": 20}], n_timesteps=2_000_000)
+    assert "20 evaluation episodes every 100,000 steps" in " ".join(line.lstrip("# ") for line in text.splitlines())
+    assert text.splitlines()[-1].endswith("--max-seconds 150 --eval-episodes 20 --eval-envs 5")
+    assert "--eval-episodes" not in comment("ars_es", "Hopper-v5", 300.0, [result(0, None)], n_timesteps=2_000_000)
 
 
 def test_threshold_of_a_dm_control_env_without_one_is_none() -> None:
