@@ -532,18 +532,14 @@ def test_compare_writes_rl_zoos_layout(tmp_path: Path, capsys: pytest.CaptureFix
     pytest.importorskip("matplotlib")
     compare = load_script("compare")
     out = tmp_path / "cmp"
-    threads = torch.get_num_threads()  # compare.py sets 1 thread (its default): restore it for the other tests
-    try:
-        # generations of 1,600 env steps (ARS, the file's Pendulum-v1 entry: n_delta 4) and 800 (CMA-ES: its file's
-        # default entry, population 4 by --override): 2,000 steps take 3,200 and 2,400, each within one generation of
-        # the budget
-        report = compare.main(
-            ["--algos", "ars_es", "cmaes", "--envs", "Pendulum-v1", "--seeds", "0", "1", "--steps", "2000"]
-            + ["--eval-freq", "800", "--eval-episodes", "2", "--out", str(out), "--threshold", "Pendulum-v1=-2000"]
-            + ["--override", "cmaes:population_size=4"]
-        )
-    finally:
-        torch.set_num_threads(threads)
+    # generations of 1,600 env steps (ARS, the file's Pendulum-v1 entry: n_delta 4) and 800 (CMA-ES: its file's
+    # default entry, population 4 by --override): 2,000 steps take 3,200 and 2,400, each within one generation of
+    # the budget
+    report = compare.main(
+        ["--algos", "ars_es", "cmaes", "--envs", "Pendulum-v1", "--seeds", "0", "1", "--steps", "2000"]
+        + ["--eval-freq", "800", "--eval-episodes", "2", "--out", str(out), "--threshold", "Pendulum-v1=-2000"]
+        + ["--override", "cmaes:population_size=4"]
+    )
     for algo, steps in (("ars_es", 3200), ("cmaes", 2400)):
         for seed in (0, 1):
             folder = out / "logs" / algo / f"Pendulum-v1_1_seed{seed}"
@@ -582,15 +578,10 @@ def test_compare_writes_rl_zoos_layout(tmp_path: Path, capsys: pytest.CaptureFix
 
 
 def test_compare_runs_sb3_contribs_ars_under_its_rl_zoo_key(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    compare = load_script("compare")
     out = tmp_path / "cmp"
-    threads = torch.get_num_threads()
-    try:
-        compare.main(
-            ["--algos", "ars", "--envs", "Pendulum-v1", "--steps", "1000", "--eval-freq", "0", "--out", str(out)]
-        )
-    finally:
-        torch.set_num_threads(threads)
+    load_script("compare").main(
+        ["--algos", "ars", "--envs", "Pendulum-v1", "--steps", "1000", "--eval-freq", "0", "--out", str(out)]
+    )
     assert "--algos ars is sb3-contrib's ARS" in capsys.readouterr().out
     model = rl_zoo3.ALGOS["ars"].load(out / "logs" / "ars" / "Pendulum-v1_1_seed0" / "Pendulum-v1.zip")
     assert type(model).__module__.startswith("sb3_contrib") and model.num_timesteps >= 1000
@@ -600,16 +591,12 @@ def test_compare_runs_sb3_contribs_ars_under_its_rl_zoo_key(tmp_path: Path, caps
 def test_compare_confirms_a_threshold_before_stopping(tmp_path: Path) -> None:
     compare = load_script("compare")
     out = tmp_path / "cmp"
-    threads = torch.get_num_threads()
-    try:
-        # any policy scores above -2000 on Pendulum-v1: the start evaluation reaches it, 3 more episodes confirm it
-        compare.main(
-            ["--algos", "ars_es", "--envs", "Pendulum-v1", "--steps", "20000", "--eval-freq", "800", "--out", str(out)]
-            + ["--eval-episodes", "2", "--threshold", "Pendulum-v1=-2000", "--stop-at-threshold"]
-            + ["--confirm-episodes", "3", "--eval-envs", "2"]
-        )
-    finally:
-        torch.set_num_threads(threads)
+    # any policy scores above -2000 on Pendulum-v1: the start evaluation reaches it, 3 more episodes confirm it
+    compare.main(
+        ["--algos", "ars_es", "--envs", "Pendulum-v1", "--steps", "20000", "--eval-freq", "800", "--out", str(out)]
+        + ["--eval-episodes", "2", "--threshold", "Pendulum-v1=-2000", "--stop-at-threshold"]
+        + ["--confirm-episodes", "3", "--eval-envs", "2"]
+    )
     folder = out / "logs" / "ars_es" / "Pendulum-v1_1_seed0"
     summary = json.loads((folder / "summary.json").read_text())
     (confirmation,) = summary["confirmations"]
