@@ -83,7 +83,8 @@ try:
     from rl_zoo3.exp_manager import ExperimentManager
     from rl_zoo3.utils import get_wrapper_class
 
-    from sb3_es.zoo import default_conf_file, register, sb3_es_algos
+    from sb3_es.zoo import RENAMED, UsageError, check_algo, default_conf_file, register, sb3_es_algos
+    from sb3_es.zoo.registry import zoo_meaning
 except ImportError as e:  # pragma: no cover
     raise SystemExit(f"benchmarks/compare.py needs rl_zoo3: pip install 'sb3-es[zoo]' ({e})") from e
 
@@ -903,9 +904,20 @@ def main(argv: list[str] | None = None) -> Path:
     given = argv if argv is not None else sys.argv[1:]
     command = "python benchmarks/compare.py " + " ".join(shlex.quote(a) for a in given)
     register()
-    if "ars" in args.algos:
-        # Unlike the zoo commands, which refuse sb3-es's old key, a comparison takes rl-zoo's keys as they are.
-        print("--algos ars is sb3-contrib's ARS (rl-zoo's key, with rl-zoo's hyperparameters); sb3-es's is ars_es.")
+    for algo in args.algos:
+        # A key sb3-es used before (RENAMED) that is rl-zoo's own is taken as rl-zoo's, with a note; the zoo commands
+        # refuse it (check_algo), and so does a comparison when rl-zoo has no such key.
+        theirs = zoo_meaning(algo) if algo in RENAMED else None
+        if theirs is None:
+            try:
+                check_algo(algo)
+            except UsageError as e:
+                raise SystemExit(str(e)) from e
+        else:
+            print(
+                f"--algos {algo} is {theirs} (rl-zoo's key, with rl-zoo's hyperparameters); "
+                f"sb3-es's is {RENAMED[algo]}."
+            )
     if not args.report_only:
         if args.steps is None and args.seconds is None:
             raise SystemExit("Give a budget: --steps N (env steps), --seconds S (training wall-clock), or both.")

@@ -42,6 +42,7 @@ from sb3_es.zoo import (  # noqa: E402
     register,
 )
 from sb3_es.zoo.hyperparams_opt import CONVERTERS, SAMPLERS  # noqa: E402
+from sb3_es.zoo.registry import zoo_meaning  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 KEYS = tuple(ALGOS)
@@ -582,7 +583,10 @@ def test_compare_runs_sb3_contribs_ars_under_its_rl_zoo_key(tmp_path: Path, caps
     load_script("compare").main(
         ["--algos", "ars", "--envs", "Pendulum-v1", "--steps", "1000", "--eval-freq", "0", "--out", str(out)]
     )
-    assert "--algos ars is sb3-contrib's ARS" in capsys.readouterr().out
+    assert "--algos ars is sb3-contrib's ARS (rl-zoo's key, with rl-zoo's hyperparameters); sb3-es's is ars_es." in (
+        capsys.readouterr().out
+    )
+    assert zoo_meaning("ars") == "sb3-contrib's ARS" and zoo_meaning("no_such_key") is None
     model = rl_zoo3.ALGOS["ars"].load(out / "logs" / "ars" / "Pendulum-v1_1_seed0" / "Pendulum-v1.zip")
     assert type(model).__module__.startswith("sb3_contrib") and model.num_timesteps >= 1000
     assert "n_delta" in (out / "configs" / "ars-Pendulum-v1.yml").read_text()  # rl-zoo's ars.yml entry

@@ -70,6 +70,15 @@ def is_sb3_es_algo(algo: str) -> bool:
     return algo in ALGOS
 
 
+def zoo_meaning(algo: str) -> str | None:
+    """
+    :param algo: rl-zoo key.
+    :return: What rl-zoo runs under it, e.g. ``"sb3-contrib's ARS"``, or ``None`` if rl-zoo has no such key.
+    """
+    theirs = rl_zoo3.ALGOS.get(algo)
+    return f"{theirs.__module__.split('.')[0].replace('_', '-')}'s {theirs.__name__}" if theirs else None
+
+
 def check_algo(algo: str) -> None:
     """
     Refuse a key that sb3-es used for one of its algorithms before and that means another library's in rl-zoo.
@@ -79,10 +88,7 @@ def check_algo(algo: str) -> None:
     if algo not in RENAMED:
         return
     new = RENAMED[algo]
-    theirs = rl_zoo3.ALGOS.get(algo)
-    meaning = (
-        f"{theirs.__module__.split('.')[0].replace('_', '-')}'s {theirs.__name__}" if theirs else "not an sb3-es key"
-    )
+    meaning = zoo_meaning(algo) or "not an sb3-es key"
     raise UsageError(
         f"--algo {algo} is {meaning} in rl-zoo; sb3-es's {ALGOS[new].__name__} is --algo {new} (runs in logs/{new}/). "
         f"Runs that sb3-es saved under logs/{algo}/ before the rename work with --algo {new} once moved to "
