@@ -186,16 +186,16 @@ class NaNObsWrapper(gym.Wrapper):
 
 class DiscreteMatchEnv(gym.Env):
     """
-    A ``Discrete(4)`` observation drawn at random each step; the reward is 1 when the ``Discrete(4)`` action is the
-    observation's target (``TARGETS[obs]``), else 0. Episodes last 10 steps: a policy that solves it returns 10, a
-    random one 2.5.
+    A ``Discrete(4)`` observation drawn at random each step; the reward is 1 when the ``Discrete(4, start)`` action
+    is the observation's target (``start + TARGETS[obs]``), else 0; an action outside the space raises. Episodes last
+    10 steps: a policy that solves it returns 10, a random one 2.5.
     """
 
     TARGETS = (2, 0, 3, 1)
 
-    def __init__(self) -> None:
+    def __init__(self, start: int = 0) -> None:
         self.observation_space = spaces.Discrete(4)
-        self.action_space = spaces.Discrete(4)
+        self.action_space = spaces.Discrete(4, start=start)
         self.state = 0
         self.t = 0
 
@@ -206,7 +206,9 @@ class DiscreteMatchEnv(gym.Env):
         return self.state, {}
 
     def step(self, action: Any) -> tuple[int, float, bool, bool, dict]:
-        reward = float(int(action) == self.TARGETS[self.state])
+        if not self.action_space.contains(int(action)):
+            raise ValueError(f"action {action} is not in {self.action_space}")
+        reward = float(int(action) - int(self.action_space.start) == self.TARGETS[self.state])
         self.t += 1
         self.state = int(self.np_random.integers(4))
         return self.state, reward, False, self.t >= 10, {}

@@ -189,6 +189,33 @@ def test_evaluator_processes_from_envs_registered_with_a_partial() -> None:
         del gym.registry["PartialPendulum-v0"]
 
 
+def test_set_env_rebuilds_the_workers_from_the_new_env(monkeypatch: pytest.MonkeyPatch) -> None:
+    """After ``set_env()`` the workers run the new env (rebuilt from its specs), not the env id of the constructor."""
+    monkeypatch.setattr(processes, "usable_cpus", lambda: 2)
+    model = ARS("LinearPolicy", "Pendulum-v1", n_delta=2, seed=0, evaluator="processes")
+    model.learn(1)
+    old = model._evaluator
+    assert isinstance(old, ProcessEvaluator) and old.env == "Pendulum-v1"
+    pids = [process.pid for process in old._workers]
+    model.set_env(make_vec_env("Pendulum-v1", env_kwargs={"g": 2.0}))
+    assert wait_gone(pids)  # the old workers are stopped at once
+    try:
+        model.learn(1, reset_num_timesteps=False)
+        new = model._evaluator
+        assert isinstance(new, ProcessEvaluator) and new is not old
+        assert new.env().unwrapped.g == 2.0  # the factory the workers build their envs with
+    finally:
+        model._evaluator.close()  # type: ignore[union-attr]
+    assert model._n_updates == 2
+
+
+def test_an_evaluator_name_given_to_load_is_checked(tmp_path: Path) -> None:
+    ARS("LinearPolicy", "Pendulum-v1", n_delta=1).save(tmp_path / "ars.zip")
+    model = ARS.load(tmp_path / "ars.zip", env=make_vec_env("Pendulum-v1"), evaluator="Processes")
+    with pytest.raises(ValueError, match=r"evaluator='Processes': use 'local', 'processes', 'ray'"):
+        model.learn(1)
+
+
 def test_models_in_a_loop() -> None:
     pids: list[int] = []
     for seed in range(3):

@@ -232,12 +232,18 @@ def test_dict_of_multi_binary_observations(algo: Algo) -> None:
 
 
 @pytest.mark.parametrize("algo", POPULATION_ALGORITHMS)
-def test_discrete_observation_task_is_solved(algo: Algo) -> None:
-    """A Discrete(4) observation (one-hot) whose value decides the rewarded action: the learned policy is perfect."""
-    env = make_vec_env(DiscreteMatchEnv, n_envs=4, seed=0)
+@pytest.mark.parametrize("start", [0, -1])
+def test_discrete_observation_task_is_solved(algo: Algo, start: int) -> None:
+    """
+    A Discrete(4) observation (one-hot) whose value decides the rewarded action: the learned policy is perfect, also
+    for an action space that starts at -1 (the env refuses an action outside it).
+    """
+    env_kwargs = dict(start=start)
+    env = make_vec_env(DiscreteMatchEnv, n_envs=4, seed=0, env_kwargs=env_kwargs)
     model = algo.cls(algo.policy, env, seed=0, **algo.cartpole)  # the settings that learn CartPole
     model.learn(10_000)
-    mean_reward, _ = evaluate_policy(model, make_vec_env(DiscreteMatchEnv, seed=1), n_eval_episodes=5)
+    eval_env = make_vec_env(DiscreteMatchEnv, seed=1, env_kwargs=env_kwargs)
+    mean_reward, _ = evaluate_policy(model, eval_env, n_eval_episodes=5)
     assert mean_reward == 10.0
 
 

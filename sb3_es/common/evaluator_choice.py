@@ -81,6 +81,7 @@ def resolve_evaluator(
             f"evaluator={evaluator!r} needs the env id the model was created with (it is not saved) or an env: set "
             f"model.evaluator = {host.__name__}('EnvId') (from {host.__module__}) before learn()."
         )
+    check_evaluator(evaluator, env_id, env)  # a name other than "local" (a typo given to load()) is refused
     if env is None:
         raise ValueError("This model has no environment: pass env= to load() or call set_env() before learn().")
     if isinstance(current, VecEnvEvaluator) and current.env is env:

@@ -238,7 +238,7 @@ class FlatPolicy(BasePolicy):
         # The raw outputs: SB3's predict() then rescales (squash) or clips them as the spec's actions do.
         out = network.forward(params, network.normalize(network.flatten_obs(obs)))
         if isinstance(self.action_space, spaces.Discrete):
-            return th.as_tensor(out.argmax(axis=1))
+            return th.as_tensor(out.argmax(axis=1) + int(self.action_space.start))
         return th.as_tensor(out)
 
 

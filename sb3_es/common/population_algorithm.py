@@ -156,6 +156,23 @@ class PopulationAlgorithm(StrategyAlgorithm):
     def _excluded_save_params(self) -> list[str]:
         return [*super()._excluded_save_params(), "evaluator", "_evaluator", "_env_id"]
 
+    def set_env(self, env: GymEnv, force_reset: bool = True) -> None:
+        """
+        Train on ``env`` from now on. Worker processes or Ray actors that the model built (``evaluator="processes"``
+        or ``"ray"``) are closed and rebuilt from the new env's Gymnasium specs at the next ``learn()``; an evaluator
+        instance passed as ``evaluator=`` keeps its own envs.
+
+        :param env: The new environment (same spaces and number of envs).
+        :param force_reset: Reset the env before the next ``learn()``.
+        """
+        super().set_env(env, force_reset)
+        if isinstance(self.evaluator, str) and self.evaluator != "local":
+            check_evaluator(self.evaluator, None, self.env)  # the workers can rebuild the new env
+            self._env_id = None
+            if self._evaluator is not None:
+                self._evaluator.close()
+                self._evaluator = None
+
     # ------------------------------------------------------------------ training
     def _get_evaluator(self) -> PopulationEvaluator:
         self._evaluator = resolve_evaluator(self.evaluator, getattr(self, "_env_id", None), self.env, self._evaluator)

@@ -238,12 +238,12 @@ class NetworkSpec:
 
         :param params: Parameters ``(k, num_params)`` (or one row, broadcast), float32.
         :param flat_obs: Flattened raw observations ``(k, obs_dim)`` (see :meth:`flatten_obs`).
-        :return: Env actions: argmax for ``Discrete``; for ``Box``, outputs rescaled to the bounds (as SB3's
-            ``unscale_action``) or clipped to them.
+        :return: Env actions: argmax (plus the space's ``start``) for ``Discrete``; for ``Box``, outputs rescaled
+            to the bounds (as SB3's ``unscale_action``) or clipped to them.
         """
         out = self.forward(params, self.normalize(flat_obs))
         if isinstance(self.action_space, spaces.Discrete):
-            return out.argmax(axis=1)
+            return out.argmax(axis=1) + int(self.action_space.start)
         shape, low, high = self._action_bounds
         actions = out.reshape((-1, *shape))
         if self.squash_output:
