@@ -118,6 +118,18 @@ def test_values_that_cannot_change_are_refused(cls: type[BaseAlgorithm], through
 
 
 @pytest.mark.parametrize("cls", list(CASES), ids=lambda cls: cls.__name__)
+def test_bad_values_are_refused_as_by_the_constructor(cls: type[BaseAlgorithm], tmp_path: Path) -> None:
+    path = saved(cls, tmp_path)
+    bad = dict(max_episode_steps=0, **({"gamma": 1.5} if cls is REINFORCE else {"n_eval_episodes": 0}))
+    for key, value in bad.items():
+        with pytest.raises(ValueError, match=rf"^{key}={value}: ") as from_load:
+            cls.load(path, **{key: value})
+        with pytest.raises(ValueError) as from_constructor:
+            cls("MlpPolicy", "Pendulum-v1", **{key: value})
+        assert str(from_load.value) == str(from_constructor.value)
+
+
+@pytest.mark.parametrize("cls", list(CASES), ids=lambda cls: cls.__name__)
 def test_unknown_names_are_refused(cls: type[BaseAlgorithm], tmp_path: Path) -> None:
     path = saved(cls, tmp_path)
     with pytest.raises(ValueError, match=rf"{cls.__name__}.load\(\) got learning_rat, which .* does not have"):

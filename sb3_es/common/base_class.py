@@ -105,8 +105,7 @@ class ESBaseAlgorithm(BaseAlgorithm):
         max_episode_steps: int | None = None,
     ) -> None:
         check_seed(seed)
-        if max_episode_steps is not None and (int(max_episode_steps) != max_episode_steps or max_episode_steps < 1):
-            raise ValueError(f"max_episode_steps={max_episode_steps}: it must be a positive integer or None.")
+        self._check_live_values({"max_episode_steps": max_episode_steps})
         self.max_episode_steps = None if max_episode_steps is None else int(max_episode_steps)
         #: Length limit of the ``TimeLimit`` added to an env given by its id that had none (not saved).
         self._added_time_limit: int | None = None
@@ -255,6 +254,18 @@ class ESBaseAlgorithm(BaseAlgorithm):
         return model
 
     @classmethod
+    def _check_live_values(cls, values: dict[str, Any]) -> None:
+        """
+        Raise a clear error for a bad value of a hyperparameter that ``load()`` may change (the constructor runs the
+        same checks); override to check a subclass's own, then call this.
+
+        :param values: ``name -> value``, any subset of the hyperparameters.
+        """
+        steps = values.get("max_episode_steps")
+        if steps is not None and (int(steps) != steps or steps < 1):
+            raise ValueError(f"max_episode_steps={steps}: it must be a positive integer or None.")
+
+    @classmethod
     def _parameters(cls) -> set[str]:
         """:return: The constructor's hyperparameters (its arguments but the policy and the env)."""
         return set(inspect.signature(cls.__init__).parameters) - {"self", "policy", "env", "_init_setup_model"}
@@ -294,6 +305,7 @@ class ESBaseAlgorithm(BaseAlgorithm):
                     f"Leave {key} out of load() (with rl-zoo's train -i: out of -params and the hyperparameter "
                     "file's entry), or train a new model."
                 )
+        cls._check_live_values(changed)
         return changed
 
     def _apply_hyperparameters(self, changed: dict[str, Any]) -> None:

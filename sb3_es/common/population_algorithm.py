@@ -123,8 +123,7 @@ class PopulationAlgorithm(StrategyAlgorithm):
         # Env id, for evaluator="processes" or "ray" (each worker builds its envs from it); not saved.
         self._env_id = env if isinstance(env, str) else None
         super().__init__(**base_arguments(super().__init__, locals()))
-        if int(n_eval_episodes) != n_eval_episodes or n_eval_episodes < 1:
-            raise ValueError(f"n_eval_episodes={n_eval_episodes}: it must be a positive integer.")
+        self._check_live_values({"n_eval_episodes": n_eval_episodes})
         if learning_rate is not None:
             check_positive("learning_rate", learning_rate)
         self.n_eval_episodes = int(n_eval_episodes)
@@ -140,6 +139,13 @@ class PopulationAlgorithm(StrategyAlgorithm):
         self.evaluator = evaluator
         self._evaluator: PopulationEvaluator | None = None
         self._stop_training = False
+
+    @classmethod
+    def _check_live_values(cls, values: dict[str, Any]) -> None:
+        episodes = values.get("n_eval_episodes", 1)
+        if int(episodes) != episodes or episodes < 1:
+            raise ValueError(f"n_eval_episodes={episodes}: it must be a positive integer.")
+        super()._check_live_values(values)
 
     @property
     def reward_shaping(self) -> RewardShaping:

@@ -100,6 +100,22 @@ class REINFORCE(ESBaseAlgorithm):
         "max_grad_norm",
     )
 
+    @classmethod
+    def _check_live_values(cls, values: dict[str, Any]) -> None:
+        n_episodes = values.get("n_episodes", 1)
+        if int(n_episodes) != n_episodes or n_episodes < 1:
+            raise ValueError(f"n_episodes={n_episodes}: it must be a positive integer (episodes per update).")
+        if not 0.0 <= values.get("gamma", 0.0) <= 1.0:
+            raise ValueError(f"gamma={values['gamma']}: the discount factor must be in [0, 1].")
+        max_grad_norm = values.get("max_grad_norm")
+        if max_grad_norm is not None and not max_grad_norm > 0:
+            raise ValueError(f"max_grad_norm={max_grad_norm}: it must be a positive number or None.")
+        if not np.isfinite(values.get("ent_coef", 0.0)):
+            raise ValueError(f"ent_coef={values['ent_coef']}: it must be a finite number.")
+        if "learning_rate" in values:
+            check_positive("learning_rate", values["learning_rate"])
+        super()._check_live_values(values)
+
     def __init__(
         self,
         policy: str | type[DiscretizedPolicy],
@@ -120,15 +136,15 @@ class REINFORCE(ESBaseAlgorithm):
         max_episode_steps: int | None = None,
         _init_setup_model: bool = True,
     ) -> None:
-        if int(n_episodes) != n_episodes or n_episodes < 1:
-            raise ValueError(f"n_episodes={n_episodes}: it must be a positive integer (episodes per update).")
-        if not 0.0 <= gamma <= 1.0:
-            raise ValueError(f"gamma={gamma}: the discount factor must be in [0, 1].")
-        if max_grad_norm is not None and not max_grad_norm > 0:
-            raise ValueError(f"max_grad_norm={max_grad_norm}: it must be a positive number or None.")
-        if not np.isfinite(ent_coef):
-            raise ValueError(f"ent_coef={ent_coef}: it must be a finite number.")
-        check_positive("learning_rate", learning_rate)
+        self._check_live_values(
+            dict(
+                n_episodes=n_episodes,
+                gamma=gamma,
+                max_grad_norm=max_grad_norm,
+                ent_coef=ent_coef,
+                learning_rate=learning_rate,
+            )
+        )
         if policy_kwargs is not None and "use_baseline" in policy_kwargs:
             raise ValueError("Pass use_baseline to REINFORCE, not in policy_kwargs.")
         if env is not None and not isinstance(env, str) and hasattr(env, "action_space"):
