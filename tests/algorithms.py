@@ -19,7 +19,7 @@ import pytest
 import torch as th
 from envs import read_csv
 from stable_baselines3.common.base_class import BaseAlgorithm
-from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.callbacks import BaseCallback, ProgressBarCallback
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.logger import configure
 from stable_baselines3.common.type_aliases import GymEnv
@@ -286,3 +286,19 @@ def check_resume(build: Callable[[VecEnv], Any], env: Callable[[], VecEnv], n: i
         model.learn(1, reset_num_timesteps=False)  # one more generation (update)
     assert_identical(policy_state(resumed), policy_state(straight))
     return straight, resumed
+
+
+def progress_bar_after_learn(model: Any, steps: int) -> Any:
+    """:return: The progress bar (tqdm) of ``model.learn(steps, progress_bar=True)``, after it."""
+    bars: list[ProgressBarCallback] = []
+    init_callback = model._init_callback
+
+    def spy(callback: Any, progress_bar: bool = False) -> Any:
+        callbacks = init_callback(callback, progress_bar)
+        bars.extend(c for c in getattr(callbacks, "callbacks", [callbacks]) if isinstance(c, ProgressBarCallback))
+        return callbacks
+
+    model._init_callback = spy
+    model.learn(steps, progress_bar=True)
+    (bar,) = bars
+    return bar.pbar

@@ -24,6 +24,7 @@ from algorithms import (
     pendulum_env,
     policy_state,
     policy_vector,
+    progress_bar_after_learn,
     spy_on_ask,
 )
 from envs import ConstantObsEnv, NaNRewardWrapper, ToyEnv, counting_env, rollout
@@ -175,8 +176,8 @@ def test_stop_training_on_max_episodes(algo: Algo) -> None:
 @pytest.mark.parametrize("algo", ALGORITHMS)
 def test_progress_bar(algo: Algo) -> None:
     model = pendulum_model(algo)
-    model.learn(GENERATION, progress_bar=True)
-    assert model.num_timesteps == GENERATION
+    pbar = progress_bar_after_learn(model, GENERATION)
+    assert model.num_timesteps == GENERATION == pbar.n == pbar.total
 
 
 # ---------------------------------------------------------------------------- logging

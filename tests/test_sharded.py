@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from algorithms import progress_bar_after_learn
 from envs import CrashingToyEnv, NeverEndingEnv, StepCounter, ToyEnv
 from sharded_helpers import (
     ENVS_PER_WORKER,
@@ -158,6 +159,13 @@ def test_timesteps_and_callbacks(toy: ShardedEvaluator) -> None:
     # on_step once per remote vec step; each episode's end appears in the replayed dones.
     assert callback.n_calls == steps // ENVS_PER_WORKER
     assert callback.dones >= 2 * 2 * model.n_delta
+
+
+def test_progress_bar_counts_the_workers_steps(toy: ShardedEvaluator) -> None:
+    """The workers' vec steps are of ENVS_PER_WORKER slots, the model env's of one: the bar counts env steps."""
+    model = make_ars(ToyEnv(), evaluator=toy)
+    pbar = progress_bar_after_learn(model, 1)
+    assert pbar.n == model.num_timesteps > ENVS_PER_WORKER
 
 
 def test_callback_stops_training(toy: ShardedEvaluator) -> None:

@@ -17,6 +17,7 @@ from sb3_es.common.base_class import ESBaseAlgorithm
 from sb3_es.common.checks import check_positive
 from sb3_es.common.evaluator_choice import check_evaluator, resolve_evaluator
 from sb3_es.common.policies import FlatPolicy, LinearPolicy, MlpPolicy
+from sb3_es.common.progress import StepsProgressBarCallback
 from sb3_es.common.remote_monitor import write_remote_episodes
 from sb3_es.common.strategy_algorithm import StrategyAlgorithm, check_noise_table_size, initial_value, make_noise_table
 from sb3_es.evaluation import PopulationEvaluator, PopulationResult, RewardShaping
@@ -180,6 +181,12 @@ class PopulationAlgorithm(StrategyAlgorithm):
                 self._evaluator = None
 
     # ------------------------------------------------------------------ training
+    def _init_callback(self, callback: MaybeCallback, progress_bar: bool = False) -> BaseCallback:
+        if progress_bar:  # SB3's bar counts num_envs per call; a worker's call stands for its own env slots
+            callbacks = callback if isinstance(callback, list) else [] if callback is None else [callback]
+            callback = [*callbacks, StepsProgressBarCallback()]
+        return super()._init_callback(callback, progress_bar=False)
+
     def _get_evaluator(self) -> PopulationEvaluator:
         self._evaluator = resolve_evaluator(self.evaluator, getattr(self, "_env_id", None), self.env, self._evaluator)
         return self._evaluator
