@@ -27,7 +27,7 @@ from algorithms import (
     progress_bar_after_learn,
     spy_on_ask,
 )
-from envs import ConstantObsEnv, NaNRewardWrapper, ToyEnv, counting_env, rollout
+from envs import ConstantObsEnv, NaNRewardWrapper, ToyEnv, counting_env, read_csv, rollout
 from stable_baselines3.common.callbacks import BaseCallback, StopTrainingOnMaxEpisodes
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.evaluation import evaluate_policy
@@ -210,6 +210,11 @@ def test_log_interval(algo: Algo, tmp_path: Path) -> None:
     model = pendulum_model(algo)
     rows = learn_logged(model, 4 * GENERATION, tmp_path, log_interval=2)
     assert [int(r["time/iterations"]) for r in rows] == [2, 4]
+    # As in SB3, iterations and log_interval count the generations of each learn() call; the steps go on.
+    model.learn(3 * GENERATION, reset_num_timesteps=False, log_interval=2)
+    rows = read_csv(tmp_path / "progress.csv")
+    assert [int(r["time/iterations"]) for r in rows] == [2, 4, 2]
+    assert [int(r["time/total_timesteps"]) for r in rows] == [2 * GENERATION, 4 * GENERATION, 6 * GENERATION]
 
 
 @pytest.mark.parametrize("algo", ALGORITHMS)

@@ -225,13 +225,15 @@ class PopulationAlgorithm(StrategyAlgorithm):
         self._stop_training = False
         if self.verbose >= 1:
             print(self._generation_size_message(total_timesteps))
+        iteration = 0  # generations of this learn() call, as SB3's on-policy algorithms count them
         while self.num_timesteps < total_timesteps and not self._stop_training:
             self._update_current_progress_remaining(self.num_timesteps, total_timesteps)
             if not self._run_generation(evaluator, callback):
                 break
             self._n_updates += 1
-            if log_interval is not None and self._n_updates % log_interval == 0:
-                self.dump_logs(self._n_updates)
+            iteration += 1
+            if log_interval is not None and iteration % log_interval == 0:
+                self.dump_logs(iteration)
         callback.on_training_end()
         return self
 
