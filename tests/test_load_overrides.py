@@ -82,37 +82,24 @@ def test_every_algorithm_has_a_case() -> None:
     assert {cls for cls in algorithms if isinstance(cls, type) and issubclass(cls, ESBaseAlgorithm)} == set(CASES)
 
 
-def load(cls: type[BaseAlgorithm], path: Path, values: dict[str, Any], through: str, **kwargs: Any) -> Any:
-    """:return: ``cls.load(path)`` with ``values`` given as keyword arguments or as SB3's ``custom_objects``."""
-    if through == "custom_objects":
-        return cls.load(path, custom_objects=values, **kwargs)
-    return cls.load(path, **values, **kwargs)
-
-
-#: The two ways SB3 users give load() a new value.
-THROUGH = ["kwargs", "custom_objects"]
-
-
-@pytest.mark.parametrize("through", THROUGH)
 @pytest.mark.parametrize("cls", list(CASES), ids=lambda cls: cls.__name__)
-def test_values_given_to_load_are_applied(cls: type[BaseAlgorithm], through: str, tmp_path: Path) -> None:
+def test_values_given_to_load_are_applied(cls: type[BaseAlgorithm], tmp_path: Path) -> None:
     case = CASES[cls]
     path = saved(cls, tmp_path)
     env = make_vec_env("Pendulum-v1", n_envs=2, seed=1)
-    model = load(cls, path, case.applied, through, env=env)
+    model = cls.load(path, env=env, **case.applied)
     start = model.num_timesteps
     model.learn(1, reset_num_timesteps=False)
     assert model.num_timesteps - start == case.steps  # the generation ran with the new values
     check_applied(model, case.applied)
 
 
-@pytest.mark.parametrize("through", THROUGH)
 @pytest.mark.parametrize("cls", list(CASES), ids=lambda cls: cls.__name__)
-def test_values_that_cannot_change_are_refused(cls: type[BaseAlgorithm], through: str, tmp_path: Path) -> None:
+def test_values_that_cannot_change_are_refused(cls: type[BaseAlgorithm], tmp_path: Path) -> None:
     path = saved(cls, tmp_path)
     ((key, value),) = CASES[cls].refused.items()
     with pytest.raises(ValueError, match=rf"{cls.__name__}.load\({key}=.*cannot change {key} once it has trained"):
-        load(cls, path, {key: value}, through)
+        cls.load(path, **{key: value})
     model = cls.load(path, **{key: getattr(cls.load(path), key)})  # the saved value itself is fine
     assert type(model) is cls
 

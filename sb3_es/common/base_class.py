@@ -231,21 +231,17 @@ class ESBaseAlgorithm(BaseAlgorithm):
         :param path: Path or file-like object of the zip archive.
         :param env: Environment to continue training on (optional for ``predict()``).
         :param device: Torch device.
-        :param custom_objects: Objects replacing saved ones, as in SB3; a hyperparameter among them is changed as
-            in ``kwargs``.
+        :param custom_objects: Objects replacing saved ones, as in SB3 (to skip what cannot be deserialized; a
+            hyperparameter to change goes in ``kwargs``).
         :param print_system_info: Print the system info of the save and of this machine.
         :param force_reset: Reset the env before training.
         :param kwargs: Hyperparameters to change (constructor arguments or saved attributes); a new value is used
             from the next update on.
         :return: The loaded model.
         """
-        # A hyperparameter in custom_objects (SB3's usual way to change learning_rate on load) is a new value like
-        # one in kwargs: compared with the saved value, refused or applied to the state built from it.
-        hyperparameters = {key: value for key, value in (custom_objects or {}).items() if key in cls._parameters()}
-        saved_objects = {key: value for key, value in (custom_objects or {}).items() if key not in hyperparameters}
-        data, _ = check_save_file(path, cls.__name__, saved_objects)
+        data, _ = check_save_file(path, cls.__name__, custom_objects)
         cls._check_save_data(path, data)
-        kwargs = {key: constant_value(value) for key, value in {**hyperparameters, **kwargs}.items()}
+        kwargs = {key: constant_value(value) for key, value in kwargs.items()}
         changed = cls._changed_hyperparameters(data, kwargs)
         if isinstance(device, str) and device == "auto":
             device = cls._auto_device
