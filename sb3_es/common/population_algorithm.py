@@ -172,9 +172,12 @@ class PopulationAlgorithm(StrategyAlgorithm):
         :param env: The new environment (same spaces and number of envs).
         :param force_reset: Reset the env before the next ``learn()``.
         """
+        env = self._wrap_env(env, self.verbose)
+        building_workers = isinstance(self.evaluator, str) and self.evaluator != "local"
+        if building_workers:
+            check_evaluator(self.evaluator, None, env)  # before anything changes: the workers can rebuild the env
         super().set_env(env, force_reset)
-        if isinstance(self.evaluator, str) and self.evaluator != "local":
-            check_evaluator(self.evaluator, None, self.env)  # the workers can rebuild the new env
+        if building_workers:
             self._env_id = None
             if self._evaluator is not None:
                 self._evaluator.close()
