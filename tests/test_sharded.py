@@ -24,6 +24,7 @@ from sharded_helpers import (
     toy_policy,
     toy_population,
 )
+from stable_baselines3.common.callbacks import BaseCallback, CheckpointCallback
 from stable_baselines3.common.env_util import make_vec_env
 
 from sb3_es.common.policies import MlpPolicy
@@ -156,9 +157,48 @@ def test_timesteps_and_callbacks(toy: ShardedEvaluator) -> None:
     learn_generations(model, 2, callback)
     steps = remote_steps(toy)
     assert model.num_timesteps == callback.steps == steps
-    # on_step once per remote vec step; each episode's end appears in the replayed dones.
-    assert callback.n_calls == steps // ENVS_PER_WORKER
+    # on_step once per env step of the model env's single slot; each episode's end appears in the replayed dones.
+    assert callback.n_calls == steps
     assert callback.dones >= 2 * 2 * model.n_delta
+
+
+class CallSizes(BaseCallback):
+    """The env steps (``n_envs``) of each ``on_step`` call, one list per generation."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.sizes: list[list[int]] = []
+
+    def _on_rollout_start(self) -> None:
+        self.sizes.append([])
+
+    def _on_step(self) -> bool:
+        assert len(self.locals["infos"]) == len(self.locals["dones"]) == len(self.locals["rewards"])
+        self.sizes[-1].append(self.locals["n_envs"])
+        return True
+
+
+@pytest.mark.parametrize("n_envs", [1, 3])
+def test_callback_calls_have_the_model_envs_size(toy: ShardedEvaluator, n_envs: int) -> None:
+    """The workers' vec steps (ENVS_PER_WORKER slots) reach the callbacks as calls of the model env's num_envs
+    steps, as SB3's callbacks count them; a generation's last call may have fewer."""
+    model = make_ars(make_vec_env(ToyEnv, n_envs=n_envs), evaluator=toy)
+    callback = CallSizes()
+    remote_steps(toy)
+    learn_generations(model, 2, callback)
+    assert sum(map(sum, callback.sizes)) == model.num_timesteps == remote_steps(toy)
+    assert len(callback.sizes) == 2
+    for sizes in callback.sizes:
+        assert set(sizes[:-1]) == {n_envs} and 0 < sizes[-1] <= n_envs
+
+
+def test_checkpoints_at_the_env_steps_asked(toy: ShardedEvaluator, tmp_path: Path) -> None:
+    """SB3's CheckpointCallback saves every save_freq calls, that is every save_freq * num_envs env steps, as with
+    the local evaluator (rl-zoo sizes its eval_freq and save_freq so)."""
+    model = make_ars(ToyEnv(), evaluator=toy)
+    model.learn(60, callback=CheckpointCallback(save_freq=7, save_path=str(tmp_path)))
+    saved = sorted(int(path.stem.split("_")[2]) for path in tmp_path.glob("rl_model_*_steps.zip"))
+    assert saved == list(range(7, model.num_timesteps + 1, 7))
 
 
 def test_progress_bar_counts_the_workers_steps(toy: ShardedEvaluator) -> None:
@@ -176,7 +216,7 @@ def test_callback_stops_training(toy: ShardedEvaluator) -> None:
     # The stop request takes effect once the generation is back: the replay stops there and the
     # generation is discarded, as with the local engine.
     assert callback.n_calls == 3
-    assert model.num_timesteps == 3 * ENVS_PER_WORKER
+    assert model.num_timesteps == 3  # calls of the model env's single slot
     assert model._n_updates == 0
     np.testing.assert_array_equal(model.policy.parameters_to_vector(), start)
 

@@ -19,6 +19,7 @@ from sb3_es.common.evaluator_choice import check_evaluator, resolve_evaluator
 from sb3_es.common.policies import FlatPolicy, LinearPolicy, MlpPolicy
 from sb3_es.common.progress import StepsProgressBarCallback
 from sb3_es.common.remote_monitor import write_remote_episodes
+from sb3_es.common.step_calls import StepCalls
 from sb3_es.common.strategy_algorithm import StrategyAlgorithm, check_noise_table_size, initial_value, make_noise_table
 from sb3_es.evaluation import PopulationEvaluator, PopulationResult, RewardShaping
 
@@ -185,7 +186,7 @@ class PopulationAlgorithm(StrategyAlgorithm):
 
     # ------------------------------------------------------------------ training
     def _init_callback(self, callback: MaybeCallback, progress_bar: bool = False) -> BaseCallback:
-        if progress_bar:  # SB3's bar counts num_envs per call; a worker's call stands for its own env slots
+        if progress_bar:  # SB3's bar counts num_envs per call; a generation's last call can stand for fewer
             callbacks = callback if isinstance(callback, list) else [] if callback is None else [callback]
             callback = [*callbacks, StepsProgressBarCallback()]
         return super()._init_callback(callback, progress_bar=False)
@@ -293,19 +294,23 @@ class PopulationAlgorithm(StrategyAlgorithm):
                 self._stop_training = True
             return not self._stop_training
 
+        # Calls of the model env's num_envs steps, as SB3's callbacks count them, whatever the evaluator's slots.
+        calls = StepCalls(step_hook, self.n_envs)
         result = evaluator.evaluate(
             self.policy.network_spec(),
             population,
             self.strategy.center,
             self.n_eval_episodes,
             seed,
-            step_hook,
+            calls,
             self.reward_shaping,
             max_episode_steps=self.episode_step_limit(),
             reset_seeds=reset_seeds,
         )
+        if not (result.stopped or calls.dropped):
+            calls.flush()
         callback.on_rollout_end()
-        if result.stopped:
+        if result.stopped or calls.dropped:
             return False
         stats = result.obs_stats
         if stats.n_nonfinite and self.policy.normalize_observations:

@@ -7,9 +7,9 @@ from stable_baselines3.common.callbacks import ProgressBarCallback
 
 class StepsProgressBarCallback(ProgressBarCallback):
     """
-    SB3's ``ProgressBarCallback``, advanced by ``n_envs`` of the step it is called for: with worker processes or Ray
-    actors a call stands for a worker's env slots, which can outnumber the model env's ``num_envs`` that SB3's bar
-    counts.
+    SB3's ``ProgressBarCallback``, advanced by ``n_envs`` of the step it is called for: with worker processes, Ray
+    actors or an evaluator with its own envs, a generation's last call can stand for fewer env steps than the model
+    env's ``num_envs`` that SB3's bar counts (see :class:`~sb3_es.common.step_calls.StepCalls`).
     """
 
     def _on_step(self) -> bool:
