@@ -372,6 +372,18 @@ def test_train_writes_rl_zoos_layout(runs: Path, key: str) -> None:
     assert (runs / "tb" / "Pendulum-v1" / tb_name).is_dir()
 
 
+def test_eval_freq_counts_env_steps_with_worker_processes(tmp_path: Path) -> None:
+    """rl-zoo divides --eval-freq by n_envs, since SB3's EvalCallback counts calls: with worker processes, whose vec
+    steps are of 4 slots, the evaluations still come every --eval-freq env steps."""
+    zoo(
+        *("train", "--algo", "ars_es", "--env", "Pendulum-v1", "-n", "2000", "--seed", "0", "-f", str(tmp_path)),
+        *("--eval-freq", "400", "--eval-episodes", "1", "--verbose", "0", "--num-threads", "1"),
+        *("-conf", str(TEST_CONFIGS / "ars_es.yml"), "-params", "evaluator:'processes'"),
+    )
+    timesteps = np.load(tmp_path / "ars_es" / "Pendulum-v1_1" / "evaluations.npz")["timesteps"]
+    assert len(timesteps) >= 5 and timesteps.tolist() == list(range(400, 400 * len(timesteps) + 1, 400))
+
+
 @pytest.mark.parametrize("key", KEYS)
 def test_enjoy(runs: Path, key: str, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
     monkeypatch.chdir(runs)  # enjoy's default folder for sb3-es algorithms: logs
