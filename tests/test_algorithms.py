@@ -31,7 +31,6 @@ from envs import ConstantObsEnv, NaNRewardWrapper, ToyEnv, counting_env, read_cs
 from stable_baselines3.common.callbacks import BaseCallback, StopTrainingOnMaxEpisodes
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.evaluation import evaluate_policy
-from stable_baselines3.common.monitor import load_results
 from stable_baselines3.common.vec_env import DummyVecEnv
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
@@ -172,20 +171,6 @@ def test_stop_training_on_max_episodes(algo: Algo) -> None:
     assert model.num_timesteps == counter[0] < 2_000
     assert_updates(algo, model, 0)  # 8 episodes per generation: it was interrupted
     assert_identical(policy_state(model), initial)
-
-
-@pytest.mark.parametrize("algo", ALGORITHMS)
-def test_episodes_cut_at_max_episode_steps_are_in_the_monitor_file(algo: Algo, tmp_path: Path) -> None:
-    """A Monitor writes only the episodes that end in its env's step(); those that sb3-es cuts at a cap below the
-    env's time limit are written to the model's Monitor file too, with their time, as rl-zoo's plot_train reads."""
-    env = make_vec_env("Pendulum-v1", n_envs=2, monitor_dir=str(tmp_path))
-    model = algo.make(env, 4, max_episode_steps=30)
-    model.learn(300)
-    env.close()
-    episodes = load_results(str(tmp_path))
-    assert model.ep_info_buffer is not None and len(episodes) == len(model.ep_info_buffer) >= 4
-    assert (episodes["l"] == 30).all() and episodes["t"].notna().all()
-    np.testing.assert_allclose(sorted(episodes["r"]), sorted(info["r"] for info in model.ep_info_buffer), atol=1e-5)
 
 
 @pytest.mark.parametrize("algo", ALGORITHMS)

@@ -16,12 +16,12 @@ from sb3_es.common.arguments import base_arguments
 from sb3_es.common.base_class import ESBaseAlgorithm
 from sb3_es.common.checks import check_positive
 from sb3_es.common.evaluator_choice import check_evaluator, resolve_evaluator
-from sb3_es.common.monitor_file import unmonitored, write_episodes
 from sb3_es.common.policies import FlatPolicy, LinearPolicy, MlpPolicy
 from sb3_es.common.progress import StepsProgressBarCallback
+from sb3_es.common.remote_monitor import write_remote_episodes
 from sb3_es.common.step_calls import StepCalls
 from sb3_es.common.strategy_algorithm import StrategyAlgorithm, check_noise_table_size, initial_value, make_noise_table
-from sb3_es.evaluation import PopulationEvaluator, PopulationResult, RewardShaping, VecEnvEvaluator
+from sb3_es.evaluation import PopulationEvaluator, PopulationResult, RewardShaping
 
 SelfPopulationAlgorithm = TypeVar("SelfPopulationAlgorithm", bound="PopulationAlgorithm")
 
@@ -350,9 +350,8 @@ class PopulationAlgorithm(StrategyAlgorithm):
         """
         assert self.ep_success_buffer is not None
         self._update_info_buffer([{"episode": info} for info in result.ep_infos])
-        evaluator = self._evaluator
-        own_env = evaluator is None or (isinstance(evaluator, VecEnvEvaluator) and evaluator.env is self.env)
-        write_episodes(self.env, unmonitored(result.ep_infos) if own_env else result.ep_infos)
+        if self._evaluator is not None:
+            write_remote_episodes(self.env, self._evaluator, result.ep_infos)
         self.ep_success_buffer.extend(result.successes)
         self.logger.record("rollout/candidate_return_mean", float(result.returns.mean()))
         self.logger.record("rollout/candidate_return_max", float(result.returns.mean(axis=1).max()))

@@ -22,7 +22,6 @@ from torch.nn import functional as F
 from sb3_es.common.arguments import base_arguments
 from sb3_es.common.base_class import ESBaseAlgorithm
 from sb3_es.common.checks import check_positive, check_scheduled_value
-from sb3_es.common.monitor_file import write_episodes
 from sb3_es.evaluation.time_limit import end_capped_episodes
 from sb3_es.reinforce.episodes import EpisodeBatch, EpisodeCollector, check_rewards
 from sb3_es.reinforce.legacy import upgrade_legacy_optimizer_state
@@ -286,9 +285,8 @@ class REINFORCE(ESBaseAlgorithm):
                 return None
             self._update_info_buffer(infos, dones)
             unmonitored = episodes.add(obs, indices.cpu().numpy(), rewards, dones, infos)
-            if unmonitored:  # no Monitor reported these (none, or an episode cut here): what was measured here
+            if unmonitored:  # no Monitor: report what was measured here
                 self._update_info_buffer(unmonitored)
-                write_episodes(env, [info["episode"] for info in unmonitored])
             obs = new_obs
         callback.on_rollout_end()
         return episodes.batch(self.gamma, self._n_updates + 1)
