@@ -31,6 +31,7 @@ from envs import ConstantObsEnv, NaNRewardWrapper, ToyEnv, counting_env, read_cs
 from stable_baselines3.common.callbacks import BaseCallback, StopTrainingOnMaxEpisodes
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.evaluation import evaluate_policy
+from stable_baselines3.common.monitor import load_results
 from stable_baselines3.common.vec_env import DummyVecEnv
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
@@ -171,6 +172,23 @@ def test_stop_training_on_max_episodes(algo: Algo) -> None:
     assert model.num_timesteps == counter[0] < 2_000
     assert_updates(algo, model, 0)  # 8 episodes per generation: it was interrupted
     assert_identical(policy_state(model), initial)
+
+
+@pytest.mark.parametrize("algo", ALGORITHMS)
+def test_episodes_cut_at_max_episode_steps_reach_the_monitor(algo: Algo, tmp_path: Path) -> None:
+    """An episode cut at a cap below the env's time limit ends in the Monitor as a truncation would: its row is in
+    the Monitor file, with the env's own reward (not the +100 per step of a wrapper after the Monitor), and the
+    episode buffer (rollout/ep_rew_mean) gets the Monitor's info."""
+    plus_100 = dict(wrapper_class=lambda env: gym.wrappers.TransformReward(env, lambda r: r + 100.0))
+    env = make_vec_env("Pendulum-v1", n_envs=2, monitor_dir=str(tmp_path), **plus_100)
+    model = algo.make(env, 4, max_episode_steps=30)
+    model.learn(300)
+    env.close()
+    episodes = load_results(str(tmp_path))
+    assert model.ep_info_buffer is not None and len(model.ep_info_buffer) >= 4
+    assert (episodes["l"] == 30).all() and len(episodes) >= len(model.ep_info_buffer)
+    assert (episodes["r"] <= 0).all() and all(info["r"] <= 0 and info["l"] == 30 for info in model.ep_info_buffer)
+    assert {round(info["r"], 4) for info in model.ep_info_buffer} <= {round(r, 4) for r in episodes["r"]}
 
 
 @pytest.mark.parametrize("algo", ALGORITHMS)

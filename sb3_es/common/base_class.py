@@ -74,8 +74,9 @@ class ESBaseAlgorithm(BaseAlgorithm):
     :param device: Torch device (``"auto"``: see :attr:`_auto_device`).
     :param seed: Random seed.
     :param max_episode_steps: Longest episode, in env steps, that training runs: an episode that reaches it is
-        truncated (as by a ``TimeLimit``). ``None``: the env's own ``TimeLimit``, or, for an env without one,
-        ``DEFAULT_MAX_EPISODE_STEPS`` (1000) with a warning at ``learn()``.
+        truncated (as by a ``TimeLimit`` inside the ``Monitor``, which records it, except in a ``SubprocVecEnv``).
+        ``None``: the env's own ``TimeLimit``, or, for an env without one, ``DEFAULT_MAX_EPISODE_STEPS`` (1000) with
+        a warning at ``learn()``.
     """
 
     #: Constructor arguments that ``load()`` may change by setting the attribute alone: read at every update, or

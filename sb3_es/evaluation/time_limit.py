@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import time
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
-from stable_baselines3.common.vec_env import VecEnv
+from stable_baselines3.common.monitor import Monitor
+from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv
 
 from sb3_es.evaluation.slot_reset import can_reset_slots, reset_slot
 
@@ -49,8 +51,10 @@ def end_capped_episodes(
     """
     End the episodes that reached ``max_episode_steps`` steps without ending, as a ``TimeLimit`` inside the VecEnv
     would have: the slot's ``done`` is set, its info gets ``TimeLimit.truncated`` and ``terminal_observation``, and
-    the slot is reset (``env_method("reset")``) with its first observation written into ``new_obs``. Arguments are
-    changed in place, right after ``env.step()`` and before they are used.
+    the slot is reset (``env_method("reset")``) with its first observation written into ``new_obs``. The slot's
+    ``Monitor`` (in a ``DummyVecEnv``) ends the episode as if the time limit were inside it: it writes its row and
+    the info gets its ``"episode"``. Arguments are changed in place, right after ``env.step()`` and before they are
+    used.
 
     A single slot can be reset only on a VecEnv that is not a ``VecEnvWrapper`` (a ``VecNormalize`` or
     ``VecFrameStack`` would not see the reset): there, reaching the cap raises an error that says to give each env
@@ -76,6 +80,45 @@ def end_capped_episodes(
             "wrapper_class=gymnasium.wrappers.TimeLimit, wrapper_kwargs=dict(max_episode_steps=1000))."
         )
     for slot in slots.tolist():
+        infos[slot]["TimeLimit.truncated"] = True
+        monitor = _slot_monitor(env, slot)
+        if monitor is not None and not monitor.needs_reset:
+            infos[slot]["episode"] = _end_monitor_episode(monitor, infos[slot])
         infos[slot]["terminal_observation"] = reset_slot(env, slot, new_obs)
         dones[slot] = True
-        infos[slot]["TimeLimit.truncated"] = True
+
+
+def _slot_monitor(env: VecEnv, slot: int) -> Monitor | None:
+    """:return: The ``Monitor`` of a ``DummyVecEnv`` slot, if it has one (another process's cannot be reached)."""
+    inner = env.envs[slot] if isinstance(env, DummyVecEnv) else None
+    while isinstance(inner, gym.Wrapper):
+        if isinstance(inner, Monitor):
+            return inner
+        inner = inner.env
+    return None
+
+
+def _end_monitor_episode(monitor: Monitor, info: dict[str, Any]) -> dict[str, Any]:
+    """
+    End the ``Monitor``'s episode as its ``step()`` does when its env truncates one (SB3 2.x): a ``Monitor`` outside
+    the cap would otherwise drop the cut episode at the reset, and its file, its ``get_episode_rewards()`` and the
+    ``info["episode"]`` of the step would miss it. Its return is the ``Monitor``'s own, before any reward wrapper
+    placed after it.
+
+    :param monitor: The slot's ``Monitor``.
+    :param info: The info of the slot's last step (``info_keywords`` are read from it).
+    :return: The episode info (``r``, ``l``, ``t`` and the ``info_keywords``).
+    """
+    monitor.needs_reset = True
+    ep_rew = sum(monitor.rewards)
+    elapsed = time.time() - monitor.t_start
+    ep_info = {"r": round(ep_rew, 6), "l": len(monitor.rewards), "t": round(elapsed, 6)}
+    for key in monitor.info_keywords:
+        ep_info[key] = info[key]
+    monitor.episode_returns.append(ep_rew)
+    monitor.episode_lengths.append(len(monitor.rewards))
+    monitor.episode_times.append(elapsed)
+    ep_info.update(monitor.current_reset_info)
+    if monitor.results_writer:
+        monitor.results_writer.write_row(ep_info)
+    return ep_info
