@@ -36,7 +36,7 @@ class PopulationAlgorithm(StrategyAlgorithm):
 
     Each generation: scheduled hyperparameters are written into the strategy (``scheduled_hyperparameters``),
     the strategy proposes candidates (``ask``), the evaluator runs them on the
-    environment (one batched forward pass per vec step, SB3 callbacks once per vec step), their
+    environment (one batched forward pass per vec step, SB3 callbacks once per ``num_envs`` env steps), their
     fitness goes back to the strategy (``tell``), the observation statistics are updated, and the
     policy takes the strategy's new center.
 

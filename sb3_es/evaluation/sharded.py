@@ -56,8 +56,9 @@ class ShardedEvaluator(PopulationEvaluator, ABC):
     ``linger=False`` makes the step counts reproducible too, at the cost of idle workers. One share never lingers.
 
     Callbacks: remote steps cannot call the driver's callbacks, so when the results are back the step hook is
-    replayed once per remote vec step (see :func:`~sb3_es.evaluation.replay.replay`): ``num_timesteps`` grows by
-    exactly the env steps taken. A callback that returns False stops the replay there and the generation is
+    replayed once per remote vec step (see :func:`~sb3_es.evaluation.replay.replay`; the algorithm regroups those
+    steps into calls of its env's ``num_envs``: :class:`~sb3_es.common.step_calls.StepCalls`): ``num_timesteps``
+    grows by exactly the env steps taken. A callback that returns False stops the replay there and the generation is
     discarded, as in the local engine (kept only if the stop came at the last replayed step); the remote work of that
     generation is lost.
 
