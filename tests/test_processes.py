@@ -164,6 +164,25 @@ def test_evaluator_processes_from_a_vec_env(monkeypatch: pytest.MonkeyPatch, tmp
         ARS("LinearPolicy", ToyEnv(), evaluator="processes")
 
 
+def test_workers_episodes_cut_at_max_episode_steps_reach_the_monitor_file(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    """The workers' Monitors end the episodes cut at max_episode_steps and report the model Monitor's
+    info_keywords, so the model's Monitor file gets those rows with every column."""
+    monkeypatch.setattr(processes, "usable_cpus", lambda: 2)
+    monitor_kwargs = dict(info_keywords=("TimeLimit.truncated",))
+    vec_env = make_vec_env("Pendulum-v1", n_envs=2, monitor_dir=str(tmp_path), monitor_kwargs=monitor_kwargs)
+    model = ARS("LinearPolicy", vec_env, n_delta=2, seed=5, evaluator="processes", max_episode_steps=50)
+    try:
+        model.learn(1)
+    finally:
+        model._evaluator.close()  # type: ignore[union-attr]
+    vec_env.close()
+    episodes = load_results(str(tmp_path))
+    assert len(episodes) == 4 and (episodes["l"] == 50).all() and episodes["t"].notna().all()
+    assert episodes["TimeLimit.truncated"].eq(True).all()
+
+
 def _pendulum(g: float) -> gym.Env:
     return gym.make("Pendulum-v1", g=g)
 

@@ -53,7 +53,8 @@ def env_recipe(env: VecEnv, evaluator: str) -> tuple[functools.partial[gym.Env],
     :param env: The model's VecEnv.
     :param evaluator: The evaluator's name, for the error messages.
     :return: A picklable factory (``gym.make`` of the spec, with the wrappers inside ``Monitor``) and the worker
-        env arguments (``wrapper_class`` for the wrappers outside ``Monitor``).
+        env arguments (``wrapper_class`` for the wrappers outside ``Monitor``, ``monitor_kwargs`` for its
+        ``info_keywords``).
     """
     specs: list[EnvSpec | None] = env.get_attr("spec")
     spec = specs[0]
@@ -84,6 +85,10 @@ def env_recipe(env: VecEnv, evaluator: str) -> tuple[functools.partial[gym.Env],
         )
     factory = functools.partial(gym.make, dataclasses.replace(spec, additional_wrappers=inner))
     args: WorkerEnvArgs = {}
+    if cut < len(wrappers):  # the workers' Monitor reports the same info keywords (rl-zoo's "is_success")
+        info_keywords = tuple(env.get_attr("info_keywords", indices=[0])[0])
+        if info_keywords:
+            args["monitor_kwargs"] = {"info_keywords": info_keywords}
     if outer:
         wrap: Any = functools.partial(_apply_wrappers, wrappers=outer)
         args["wrapper_class"] = wrap
