@@ -307,10 +307,11 @@ class PopulationAlgorithm(StrategyAlgorithm):
             max_episode_steps=self.episode_step_limit(),
             reset_seeds=reset_seeds,
         )
-        if not (result.stopped or calls.dropped):
+        stopped = result.stopped or calls.dropped
+        if not stopped:
             calls.flush()
         callback.on_rollout_end()
-        if result.stopped or calls.dropped:
+        if stopped:
             return False
         stats = result.obs_stats
         if stats.n_nonfinite and self.policy.normalize_observations:

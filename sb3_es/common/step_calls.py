@@ -28,8 +28,8 @@ def _rows(value: Any, start: int, stop: int) -> Any:
 
 
 def _stack(values: list[Any]) -> Any:
-    if len(values) == 1 or any(value is None for value in values):
-        return values[0] if len(values) == 1 else None
+    if any(value is None for value in values):
+        return None
     if isinstance(values[0], dict):
         return {key: np.concatenate([value[key] for value in values]) for key in values[0]}
     return np.concatenate(values)
@@ -92,8 +92,8 @@ class StepCalls:
             return True
         self._pieces.append((infos, np.asarray(dones), np.asarray(rewards), new_obs, actions))
         self._pending += n_envs
-        while self._pending >= self.n_envs:
-            if not self._call(self.n_envs):
+        while self._pending >= m:
+            if not self._call(m):
                 self.dropped = self._pending > 0
                 self._pieces.clear()
                 self._pending = 0

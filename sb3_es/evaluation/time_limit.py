@@ -7,6 +7,7 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
+from stable_baselines3.common.env_util import unwrap_wrapper
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv
 
@@ -90,12 +91,7 @@ def end_capped_episodes(
 
 def _slot_monitor(env: VecEnv, slot: int) -> Monitor | None:
     """:return: The ``Monitor`` of a ``DummyVecEnv`` slot, if it has one (another process's cannot be reached)."""
-    inner = env.envs[slot] if isinstance(env, DummyVecEnv) else None
-    while isinstance(inner, gym.Wrapper):
-        if isinstance(inner, Monitor):
-            return inner
-        inner = inner.env
-    return None
+    return unwrap_wrapper(env.envs[slot], Monitor) if isinstance(env, DummyVecEnv) else None  # type: ignore[return-value]
 
 
 def _end_monitor_episode(monitor: Monitor, info: dict[str, Any]) -> dict[str, Any]:
