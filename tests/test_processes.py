@@ -183,6 +183,28 @@ def test_workers_episodes_cut_at_max_episode_steps_reach_the_monitor_file(
     assert episodes["TimeLimit.truncated"].eq(True).all()
 
 
+def test_workers_episodes_are_timed_from_the_model_monitors_start(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    """The rows that the workers' episodes add to the model's Monitor file have their time ``t`` measured from that
+    Monitor's start, as the model's own episodes would: not from the workers' start (at ``learn()``, and again for
+    fresh workers)."""
+    monkeypatch.setattr(processes, "usable_cpus", lambda: 2)
+    vec_env = make_vec_env("Pendulum-v1", n_envs=2, monitor_dir=str(tmp_path))
+    model = ARS("LinearPolicy", vec_env, n_delta=2, seed=5, evaluator="processes")
+    time.sleep(1.0)
+    try:
+        model.learn(1)
+        model._evaluator.close()  # type: ignore[union-attr]  # the next generation starts fresh workers
+        time.sleep(0.5)
+        model.learn(1, reset_num_timesteps=False)
+    finally:
+        model._evaluator.close()  # type: ignore[union-attr]
+    vec_env.close()
+    t = load_results(str(tmp_path))["t"].to_numpy()  # sorted by t
+    assert len(t) == 8 and (t[:4] >= 1.0).all() and (t[4:] >= t[3] + 0.5).all()
+
+
 def _pendulum(g: float) -> gym.Env:
     return gym.make("Pendulum-v1", g=g)
 

@@ -18,7 +18,7 @@ from sb3_es.common.checks import check_positive
 from sb3_es.common.evaluator_choice import check_evaluator, resolve_evaluator
 from sb3_es.common.policies import FlatPolicy, LinearPolicy, MlpPolicy
 from sb3_es.common.progress import StepsProgressBarCallback
-from sb3_es.common.remote_monitor import write_remote_episodes
+from sb3_es.common.remote_monitor import align_clock, write_remote_episodes
 from sb3_es.common.step_calls import StepCalls
 from sb3_es.common.strategy_algorithm import StrategyAlgorithm, check_noise_table_size, initial_value, make_noise_table
 from sb3_es.evaluation import PopulationEvaluator, PopulationResult, RewardShaping
@@ -193,6 +193,7 @@ class PopulationAlgorithm(StrategyAlgorithm):
 
     def _get_evaluator(self) -> PopulationEvaluator:
         self._evaluator = resolve_evaluator(self.evaluator, getattr(self, "_env_id", None), self.env, self._evaluator)
+        align_clock(self.env, self._evaluator)
         return self._evaluator
 
     def learn(

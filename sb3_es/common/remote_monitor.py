@@ -1,7 +1,8 @@
 """The model's ``Monitor`` file gets the episodes that worker processes or Ray actors ran.
 
 With ``evaluator="processes"`` or ``"ray"`` the model's own envs run no episode, so their ``Monitor`` CSV files
-(which rl-zoo's ``plot_train`` reads) would stay empty; the driver writes the workers' episodes to the first one.
+(which rl-zoo's ``plot_train`` reads) would stay empty; the driver writes the workers' episodes to the first one,
+their time ``t`` measured from that ``Monitor``'s start.
 """
 
 from __future__ import annotations
@@ -12,6 +13,30 @@ from typing import Any
 from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv, VecEnvWrapper
 
 from sb3_es.evaluation import PopulationEvaluator, VecEnvEvaluator
+from sb3_es.evaluation.sharded import ShardedEvaluator
+
+
+def _first_monitor_env(env: VecEnv | None) -> DummyVecEnv | None:
+    """:return: The model's ``DummyVecEnv`` if its first env has a ``Monitor`` (another process's cannot be written)."""
+    venv = env
+    while isinstance(venv, VecEnvWrapper):
+        venv = venv.venv
+    if isinstance(venv, DummyVecEnv) and venv.has_attr("results_writer"):
+        return venv
+    return None
+
+
+def align_clock(env: VecEnv | None, evaluator: PopulationEvaluator) -> None:
+    """
+    Have the workers measure their episodes' time from the start of the model's first ``Monitor``, as the model's
+    own envs would (their own start differs, and a replaced worker's would start again).
+
+    :param env: The model's VecEnv.
+    :param evaluator: The evaluator about to run a generation.
+    """
+    venv = _first_monitor_env(env)
+    if venv is not None and isinstance(evaluator, ShardedEvaluator):
+        evaluator.clock_start = float(venv.get_attr("t_start", indices=[0])[0])
 
 
 def write_remote_episodes(
@@ -22,16 +47,12 @@ def write_remote_episodes(
 
     :param env: The model's VecEnv.
     :param evaluator: The evaluator that ran the generation (nothing is written for the model's own VecEnv).
-    :param ep_infos: The episodes (the workers' ``Monitor`` infos: ``r``, ``l``, ``t``).
+    :param ep_infos: The episodes (the workers' ``Monitor`` infos: ``r``, ``l``, ``t``; see :func:`align_clock`).
     """
-    if env is None or (isinstance(evaluator, VecEnvEvaluator) and evaluator.env is env):
+    if isinstance(evaluator, VecEnvEvaluator) and evaluator.env is env:
         return
-    venv = env
-    while isinstance(venv, VecEnvWrapper):
-        venv = venv.venv
-    if not isinstance(venv, DummyVecEnv):  # another process's Monitor cannot be written from here
-        return
-    writer = venv.get_attr("results_writer", indices=[0])[0] if venv.has_attr("results_writer") else None
+    venv = _first_monitor_env(env)
+    writer = None if venv is None else venv.get_attr("results_writer", indices=[0])[0]
     if writer is None:
         return
     for info in ep_infos:

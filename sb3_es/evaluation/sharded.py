@@ -110,6 +110,10 @@ class ShardedEvaluator(PopulationEvaluator, ABC):
         self.linger = bool(linger)
         #: Number of workers replaced after they died, over the evaluator's life.
         self.restarted_workers = 0
+        #: Wall-clock origin (``time.time()``) of the workers' ``Monitor``: an episode's ``t`` is measured from it. The
+        #: evaluator's creation by default; an algorithm sets its own env's ``Monitor`` start, so that the episodes it
+        #: writes to that ``Monitor``'s file share its clock (a replaced worker keeps it too).
+        self.clock_start = time.time()
         #: Timings of the last generation: ``wall`` (s, whole ``evaluate``), ``eval_times`` (s, each worker's time
         #: inside the engine), ``linger_times`` (s, the part of it spent on the center policy after the worker's
         #: share was done), ``replay`` (s, callback replay), ``n_steps`` (env steps of each worker).
@@ -218,6 +222,7 @@ class ShardedEvaluator(PopulationEvaluator, ABC):
             "shaping": generation.shaping,
             "max_episode_steps": generation.max_episode_steps,
             "n_candidates": n_candidates,
+            "clock_start": self.clock_start,
             # Reset seed of job j (None: the slots' own sequences).
             "reset_seeds": None if generation.reset_seeds is None else np.asarray(generation.reset_seeds).T.ravel(),
         }

@@ -16,7 +16,8 @@ from typing import Any, TypedDict
 
 import gymnasium as gym
 import numpy as np
-from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.env_util import make_vec_env, unwrap_wrapper
+from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv
 from typing_extensions import Unpack
 
@@ -112,6 +113,18 @@ class ShareRunner:
         self.env: VecEnv = make_vec_env(make_env_fn(env), **config)
         self.engine = VecEnvEvaluator(self.env)
         self.noise_tables: dict[tuple[int, int], np.ndarray] = {}
+        self._clock_start: float | None = None
+
+    def _set_clock(self, clock_start: float) -> None:
+        """Measure the episodes' ``t`` from the driver's clock origin: the ``Monitor`` of each slot starts there."""
+        if clock_start == self._clock_start:
+            return
+        # Another process's Monitor (a SubprocVecEnv inside the worker) keeps its own clock.
+        for env in self.env.envs if isinstance(self.env, DummyVecEnv) else []:
+            monitor = unwrap_wrapper(env, Monitor)
+            if monitor is not None:
+                monitor.t_start = clock_start  # type: ignore[attr-defined]
+        self._clock_start = clock_start
 
     def _check(self, network: NetworkSpec) -> None:
         for name in ("observation_space", "action_space"):
@@ -135,7 +148,7 @@ class ShareRunner:
 
         :param payload: The generation's data: ``network``, ``center``, ``population`` (rows) or ``noise``
             (table key, offsets, scales), ``shaping``, ``max_episode_steps``, ``n_candidates``, ``reset_seeds``
-            (the reset seed of each job, or ``None``).
+            (the reset seed of each job, or ``None``), ``clock_start`` (the origin of the episodes' ``t``).
         :param jobs: The jobs of this share: job ``j`` is episode ``j // n_candidates`` of candidate
             ``j % n_candidates``.
         :param seed: Env seed of this share.
@@ -147,6 +160,7 @@ class ShareRunner:
         """
         network: NetworkSpec = payload["network"]
         self._check(network)
+        self._set_clock(payload["clock_start"])
         center = payload["center"]
         candidates = jobs % payload["n_candidates"]
         reset_seeds = None if payload["reset_seeds"] is None else payload["reset_seeds"][jobs][:, None]
