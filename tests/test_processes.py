@@ -192,12 +192,16 @@ def test_workers_episodes_are_timed_from_the_model_monitors_start(
     monkeypatch.setattr(processes, "usable_cpus", lambda: 2)
     vec_env = make_vec_env("Pendulum-v1", n_envs=2, monitor_dir=str(tmp_path))
     model = ARS("LinearPolicy", vec_env, n_delta=2, seed=5, evaluator="processes")
+    start = vec_env.get_attr("t_start", indices=[0])[0]
     time.sleep(1.0)
     try:
-        model.learn(1)
-        model._evaluator.close()  # type: ignore[union-attr]  # the next generation starts fresh workers
-        time.sleep(0.5)
-        model.learn(1, reset_num_timesteps=False)
+        for pause in (0.0, 0.5):
+            time.sleep(pause)
+            model.learn(1, reset_num_timesteps=False)
+            evaluator = model._evaluator
+            assert isinstance(evaluator, ProcessEvaluator)
+            assert evaluator.call_workers(lambda env: set(env.get_attr("t_start"))) == [{start}, {start}]
+            evaluator.close()  # the next generation starts fresh workers
     finally:
         model._evaluator.close()  # type: ignore[union-attr]
     vec_env.close()

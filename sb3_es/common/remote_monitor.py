@@ -17,7 +17,7 @@ from sb3_es.evaluation.sharded import ShardedEvaluator
 
 
 def _first_monitor_env(env: VecEnv | None) -> DummyVecEnv | None:
-    """:return: The model's ``DummyVecEnv`` if its first env has a ``Monitor`` (another process's cannot be written)."""
+    """:return: The model's ``DummyVecEnv`` if its envs have a ``Monitor`` (another process's cannot be written)."""
     venv = env
     while isinstance(venv, VecEnvWrapper):
         venv = venv.venv
@@ -32,7 +32,7 @@ def align_clock(env: VecEnv | None, evaluator: PopulationEvaluator) -> None:
     own envs would (their own start differs, and a replaced worker's would start again).
 
     :param env: The model's VecEnv.
-    :param evaluator: The evaluator about to run a generation.
+    :param evaluator: The evaluator about to run a ``learn()`` call's generations.
     """
     venv = _first_monitor_env(env)
     if venv is not None and isinstance(evaluator, ShardedEvaluator):

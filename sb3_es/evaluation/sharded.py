@@ -112,7 +112,8 @@ class ShardedEvaluator(PopulationEvaluator, ABC):
         self.restarted_workers = 0
         #: Wall-clock origin (``time.time()``) of the workers' ``Monitor``: an episode's ``t`` is measured from it. The
         #: evaluator's creation by default; an algorithm sets its own env's ``Monitor`` start, so that the episodes it
-        #: writes to that ``Monitor``'s file share its clock (a replaced worker keeps it too).
+        #: writes to that ``Monitor``'s file share its clock (fresh and replaced workers too; Ray actors on other
+        #: machines add their clock's offset from the driver's).
         self.clock_start = time.time()
         #: Timings of the last generation: ``wall`` (s, whole ``evaluate``), ``eval_times`` (s, each worker's time
         #: inside the engine), ``linger_times`` (s, the part of it spent on the center policy after the worker's

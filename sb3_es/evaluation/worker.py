@@ -16,8 +16,7 @@ from typing import Any, TypedDict
 
 import gymnasium as gym
 import numpy as np
-from stable_baselines3.common.env_util import make_vec_env, unwrap_wrapper
-from stable_baselines3.common.monitor import Monitor
+from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv
 from typing_extensions import Unpack
 
@@ -119,11 +118,8 @@ class ShareRunner:
         """Measure the episodes' ``t`` from the driver's clock origin: the ``Monitor`` of each slot starts there."""
         if clock_start == self._clock_start:
             return
-        # Another process's Monitor (a SubprocVecEnv inside the worker) keeps its own clock.
-        for env in self.env.envs if isinstance(self.env, DummyVecEnv) else []:
-            monitor = unwrap_wrapper(env, Monitor)
-            if monitor is not None:
-                monitor.t_start = clock_start  # type: ignore[attr-defined]
+        # Through any wrapper outside the Monitor, and into the processes of a SubprocVecEnv.
+        self.env.env_method("set_wrapper_attr", "t_start", clock_start, force=False)
         self._clock_start = clock_start
 
     def _check(self, network: NetworkSpec) -> None:
