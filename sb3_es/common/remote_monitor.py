@@ -10,7 +10,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv, VecEnvWrapper
+from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv
 
 from sb3_es.evaluation import PopulationEvaluator, VecEnvEvaluator
 from sb3_es.evaluation.sharded import ShardedEvaluator
@@ -18,9 +18,7 @@ from sb3_es.evaluation.sharded import ShardedEvaluator
 
 def _first_monitor_env(env: VecEnv | None) -> DummyVecEnv | None:
     """:return: The model's ``DummyVecEnv`` if its envs have a ``Monitor`` (another process's cannot be written)."""
-    venv = env
-    while isinstance(venv, VecEnvWrapper):
-        venv = venv.venv
+    venv = None if env is None else env.unwrapped  # inside VecNormalize & co.
     if isinstance(venv, DummyVecEnv) and venv.has_attr("results_writer"):
         return venv
     return None
