@@ -55,7 +55,8 @@ def import_ray() -> Any:
         import ray
     except ImportError as e:  # pragma: no cover - depends on the environment
         raise ImportError(
-            "RayEvaluator needs Ray: install it with `pip install sb3-es[ray]` (or `pip install ray`)."
+            "RayEvaluator needs Ray: install sb3-es's [ray] extra (`pip install -e '.[ray]'` in its clone) or "
+            "`pip install ray`."
         ) from e
     return ray
 
