@@ -17,9 +17,11 @@ import pytest
 import torch as th
 from algorithms import ALGORITHMS, POPULATION_ALGORITHMS, Algo
 from envs import MultiDiscreteActionEnv
+from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.policies import BasePolicy
 
 from sb3_es import ARS, CMAES, PGPE, REINFORCE, OpenES, SimpleES
+from sb3_es.evaluation import VecEnvEvaluator
 
 
 # ---------------------------------------------------------------------------- hyperparameters
@@ -48,7 +50,7 @@ BAD_HYPERPARAMETERS = [
     *each(ARS, "learning_rate", [0.0, -0.02, NAN, INF, lambda progress: 0.0]),
     *each(ARS, "n_eval_episodes", [0, -2, 1.5]),
     *each(OpenES, "population_size", [1, 0, -2], antithetic=True),
-    *each(OpenES, "population_size", [1, 0, -2], antithetic=False),
+    *each(OpenES, "population_size", [1, 0, -2, 4.5], antithetic=False),
     *each(OpenES, "sigma", [0.0, -0.1, NAN, lambda progress: 0.0]),
     *each(OpenES, "sigma_decay", [0.0, -0.5, 1.01, 2.0]),
     *each(OpenES, "learning_rate_decay", [0.0, -0.5, 1.01, 2.0]),
@@ -59,23 +61,31 @@ BAD_HYPERPARAMETERS = [
     *each(OpenES, "weight_decay", [NAN, -0.1]),
     *each(OpenES, "fitness_shaping", ["ranks"]),
     *each(OpenES, "optimizer", ["rmsprop"]),
-    *each(CMAES, "population_size", [1, 0, -3]),
+    *each(CMAES, "population_size", [1, 0, -3, 5.5]),
     *each(CMAES, "sigma", [0.0, -0.1, NAN, INF]),
     *each(CMAES, "max_restarts", [-1, 1.5, NAN], r"max_restarts=(-1|1.5|nan): it must be a non-negative integer"),
     *each(CMAES, "diagonal", ["yes"]),
     *each(CMAES, "restarts", ["lpop"]),
-    *each(PGPE, "population_size", [3, 7, 0]),
+    *each(PGPE, "population_size", [3, 7, 0, 4.5, "4"]),
     *each(PGPE, "stdev_init", [0.0]),
     *each(PGPE, "stdev_max_change", [1.0, 0.0]),
     *each(PGPE, "stdev_learning_rate", [-0.1]),
     *each(PGPE, "max_speed", [0.0]),
     *each(PGPE, "momentum", [1.0]),
+    *each(
+        PGPE,
+        "momentum",
+        [1.5, -0.1],
+        r"momentum=(1.5|-0.1): the SGD momentum",
+        optimizer="sgd",
+        center_learning_rate=0.1,
+    ),
     *each(PGPE, "optimizer", ["adam"], "center_learning_rate"),
     *each(PGPE, "max_speed", [0.2], optimizer="adam", center_learning_rate=0.01),
     *each(PGPE, "optimizer", ["rmsprop"], center_learning_rate=0.01),
     *each(PGPE, "fitness_shaping", ["rank"]),
-    *each(SimpleES, "n_elite", [0, 17]),
-    *each(SimpleES, "population_size", [1]),
+    *each(SimpleES, "n_elite", [0, 17, 1.5]),
+    *each(SimpleES, "population_size", [1, 4.5]),
     *each(SimpleES, "sigma", [0.0]),
     *each(SimpleES, "weights", ["fitness"]),
     *each(REINFORCE, "n_episodes", [0, -3], r"n_episodes=(0|-3)"),
@@ -98,10 +108,24 @@ BAD_HYPERPARAMETERS = [
         use_baseline=True,
     ),
     *each(REINFORCE, "policy_kwargs", [dict(net_arch=dict(pi=[8], qf=[8]))], r"unknown entry \['qf'\]"),
+    *each(REINFORCE, "policy_kwargs", [dict(value_net_arch=[7])], r"value_net_arch=\[7\] gives .* use_baseline=True"),
     *each(
         REINFORCE, "policy_kwargs", [dict(value_net_arch=[8, 0])], r"value_net_arch=\[8, 0\]: give a list of positive"
     ),
 ]
+
+
+@pytest.mark.parametrize("algo", POPULATION_ALGORITHMS)
+def test_whole_number_floats_are_counts(algo: Algo) -> None:
+    # A YAML file or rl-zoo's -params can give a count as 4.0: it is used as the integer 4.
+    sizes = {key: float(value) for key, value in algo.size(4).items()}
+    model = algo.make("Pendulum-v1", 4, **sizes, n_eval_episodes=1.0)
+    model.learn(1)
+    for key, value in sizes.items():
+        assert type(getattr(model, key)) is int and getattr(model, key) == value
+        if hasattr(model.strategy, key):
+            assert type(getattr(model.strategy, key)) is int
+    assert model.num_timesteps == model.strategy.population_size * 200
 
 
 @pytest.mark.parametrize(("cls", "kwargs", "match"), BAD_HYPERPARAMETERS)
@@ -258,3 +282,10 @@ def test_load_with_custom_objects_does_not_warn(tmp_path: Path, algo: Algo) -> N
     np.testing.assert_array_equal(
         model.predict(obs, deterministic=True)[0], original.predict(obs, deterministic=True)[0]
     )
+
+
+def test_an_evaluator_on_another_env_is_named() -> None:
+    evaluator = VecEnvEvaluator(make_vec_env("Acrobot-v1"))  # 6 observations; the model's CartPole-v1 has 4
+    model = ARS("LinearPolicy", "CartPole-v1", n_delta=2, evaluator=evaluator)
+    with pytest.raises(ValueError, match=r"The evaluator's env has observation_space Box.*same env \(and wrappers\)"):
+        model.learn(1)

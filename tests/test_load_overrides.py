@@ -123,6 +123,41 @@ def test_unknown_names_are_refused(cls: type[BaseAlgorithm], tmp_path: Path) -> 
         cls.load(path, learning_rat=0.1)
 
 
+@pytest.mark.parametrize("cls", list(CASES), ids=lambda cls: cls.__name__)
+def test_whole_number_floats_given_to_load_are_counts(cls: type[BaseAlgorithm], tmp_path: Path) -> None:
+    # rl-zoo's -params or a YAML file may give a count as 2.0: the model and its strategy use the integer 2.
+    case = CASES[cls]
+    counts = {k: float(v) for k, v in case.applied.items() if type(v) is int}
+    assert counts
+    model = cls.load(saved(cls, tmp_path), env=make_vec_env("Pendulum-v1", n_envs=2, seed=1), **counts)
+    start = model.num_timesteps
+    model.learn(1, reset_num_timesteps=False)
+    assert model.num_timesteps - start == case.steps
+    for key, value in counts.items():
+        assert type(getattr(model, key)) is int and getattr(model, key) == value
+        if isinstance(model, PopulationAlgorithm) and hasattr(model.strategy, key):
+            assert type(getattr(model.strategy, key)) is int
+
+
+def test_values_checked_by_a_strategy_or_with_the_schedules_are_refused_on_load(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match=r"max_restarts=-1: it must be at least 0"):
+        CMAES.load(saved(CMAES, tmp_path), max_restarts=-1)
+    with pytest.raises(ValueError, match=r"max_restarts=2.5: it must be a whole number"):
+        CMAES.load(saved(CMAES, tmp_path), max_restarts=2.5)
+    model = OpenES("MlpPolicy", "Pendulum-v1", population_size=4, sigma=lambda progress: 0.1 * progress)
+    model.save(tmp_path / "openes.zip")
+    with pytest.raises(ValueError, match=r"sigma_decay=0.5 decays a float sigma, but sigma is a schedule"):
+        OpenES.load(tmp_path / "openes.zip", sigma_decay=0.5)
+
+
+def test_the_saved_stats_window_size_is_no_change(tmp_path: Path) -> None:
+    # SB3 saves it as _stats_window_size: load() compares with that, and names the saved value when it differs.
+    path = saved(ARS, tmp_path)
+    assert ARS.load(path, stats_window_size=100)._stats_window_size == 100
+    with pytest.raises(ValueError, match=r"the saved model has stats_window_size=100, and ARS cannot change"):
+        ARS.load(path, stats_window_size=10)
+
+
 def test_ars_n_delta_below_the_saved_n_top_is_refused(tmp_path: Path) -> None:
     path = saved(ARS, tmp_path)
     with pytest.raises(ValueError, match=r"n_top=4 must be between 1 and n_delta=2"):

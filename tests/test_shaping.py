@@ -49,12 +49,19 @@ def test_shaping_order_terminal_then_clip_then_offset() -> None:
         (dict(reward_clip=(1, -1)), "low < high"),
         (dict(reward_clip=5), "two finite numbers"),
         (dict(reward_clip=(0, float("inf"))), "two finite numbers"),
+        (dict(reward_clip=[0, "1"]), "two finite numbers"),
+        (dict(reward_clip=(True, 2)), "two finite numbers"),
         (dict(terminal_reward=float("nan")), "terminal_reward=nan"),
     ],
 )
 def test_bad_shaping_is_refused_at_construction(kwargs: dict[str, Any], message: str) -> None:
     with pytest.raises(ValueError, match=message):
         ARS("LinearPolicy", "CartPole-v1", **kwargs)
+
+
+def test_reward_clip_from_a_numpy_array() -> None:
+    shaping = RewardShaping.create(reward_clip=np.array([-1.0, 1.0]))
+    assert shaping.reward_clip == (-1.0, 1.0) and all(type(v) is float for v in shaping.reward_clip)
 
 
 @pytest.mark.parametrize("algo", POPULATION_ALGORITHMS)

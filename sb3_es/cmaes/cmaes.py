@@ -14,6 +14,7 @@ from sb3_es.common.arguments import base_arguments
 from sb3_es.common.checks import check_non_negative
 from sb3_es.common.population_algorithm import PopulationAlgorithm, check_positive
 from sb3_es.evaluation import PopulationEvaluator
+from sb3_es.strategies.base import check_count
 from sb3_es.strategies.cmaes import CMAESStrategy, Restarts
 
 SelfCMAES = TypeVar("SelfCMAES", bound="CMAES")
@@ -76,10 +77,10 @@ class CMAES(PopulationAlgorithm):
             raise ValueError(f"diagonal={diagonal!r}: choose True, False or 'auto'.")
         super().__init__(**base_arguments(super().__init__, locals()))
         self.sigma = sigma
-        self.population_size = population_size
+        self.population_size = None if population_size is None else check_count("population_size", population_size, 2)
         self.diagonal = diagonal
         self.restarts = restarts
-        self.max_restarts = max_restarts
+        self.max_restarts = int(max_restarts)
         self.cma_options = cma_options
         if _init_setup_model:
             self._setup_model()

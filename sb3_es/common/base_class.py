@@ -40,6 +40,16 @@ def constant_value(value: Any) -> Any:
     return value.val if isinstance(value, ConstantSchedule) else value
 
 
+def _as_saved_type(value: Any, saved: Any) -> Any:
+    """:return: ``value``, an ``int`` where the saved value is one and ``value`` a whole float (YAML's ``4.0``)."""
+    whole = isinstance(value, float) and value.is_integer()
+    return int(value) if whole and isinstance(saved, int) and not isinstance(saved, bool) else value
+
+
+#: Marks a constructor argument that the save does not hold.
+_MISSING = object()
+
+
 def _frozen(value: Any) -> Any:
     """:return: ``value`` with lists as tuples, to compare a value given to ``load()`` with the saved one."""
     return tuple(_frozen(v) for v in value) if isinstance(value, (list, tuple)) else value
@@ -242,7 +252,7 @@ class ESBaseAlgorithm(BaseAlgorithm):
         """
         data, _ = check_save_file(path, cls.__name__, custom_objects)
         cls._check_save_data(path, data)
-        kwargs = {key: constant_value(value) for key, value in kwargs.items()}
+        kwargs = {key: _as_saved_type(constant_value(value), data.get(key)) for key, value in kwargs.items()}
         changed = cls._changed_hyperparameters(data, kwargs)
         if isinstance(device, str) and device == "auto":
             device = cls._auto_device
@@ -289,15 +299,18 @@ class ESBaseAlgorithm(BaseAlgorithm):
                 f"{cls.__name__}.load() got {', '.join(unknown)}, which {cls.__name__} does not have (its "
                 f"hyperparameters: {', '.join(sorted(parameters))}). Check the spelling."
             )
+        # SB3 saves some constructor arguments under a private name (stats_window_size as _stats_window_size).
+        saved = {key: data[key] if key in data else data.get(f"_{key}", _MISSING) for key in kwargs}
         changed = {
             key: value
             for key, value in kwargs.items()
-            if key in parameters and (key not in data or _frozen(value) != _frozen(data[key]))
+            if key in parameters and (saved[key] is _MISSING or _frozen(value) != _frozen(saved[key]))
         }
         for key, value in changed.items():
             if key not in cls._applicable_on_load():
+                before = None if saved[key] is _MISSING else saved[key]
                 raise ValueError(
-                    f"{cls.__name__}.load({key}={value!r}): the saved model has {key}={data.get(key)!r}, and "
+                    f"{cls.__name__}.load({key}={value!r}): the saved model has {key}={before!r}, and "
                     f"{cls.__name__} cannot change {key} once it has trained (the saved state was built with it). "
                     f"Leave {key} out of load() (with rl-zoo's train -i: out of -params and the hyperparameter "
                     "file's entry), or train a new model."

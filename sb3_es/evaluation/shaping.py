@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+import numbers
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -46,8 +48,13 @@ class RewardShaping:
         """
         clip: tuple[float, float] | None = None
         if reward_clip is not None:
-            values = list(reward_clip) if isinstance(reward_clip, Sequence) and not isinstance(reward_clip, str) else []
-            if len(values) != 2 or not all(np.isfinite(float(v)) for v in values) or values[0] >= values[1]:
+            values: list[Any] = []
+            if isinstance(reward_clip, np.ndarray):
+                values = reward_clip.ravel().tolist()
+            elif isinstance(reward_clip, Sequence) and not isinstance(reward_clip, str):
+                values = list(reward_clip)
+            finite = all(isinstance(v, numbers.Real) and not isinstance(v, bool) and math.isfinite(v) for v in values)
+            if len(values) != 2 or not finite or values[0] >= values[1]:
                 raise ValueError(
                     f"reward_clip={reward_clip!r}: give two finite numbers (low, high) with low < high, e.g. "
                     "reward_clip=(-1, 1), or None for no clipping."

@@ -54,6 +54,13 @@ class VecEnvEvaluator(PopulationEvaluator):
         network = generation.network  # observation statistics frozen for the generation
         shaping = generation.shaping
         env = self.env
+        for name in ("observation_space", "action_space"):
+            ours, theirs = getattr(env, name), getattr(network, name)
+            if ours != theirs:
+                raise ValueError(
+                    f"The evaluator's env has {name} {ours}, but the policy was built for {theirs}: give the "
+                    "evaluator the same env (and wrappers) as the model."
+                )
         reset_seeds = generation.reset_seeds
         if reset_seeds is not None and not can_reset_slots(env):
             raise ValueError(

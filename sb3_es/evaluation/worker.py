@@ -122,15 +122,6 @@ class ShareRunner:
         self.env.env_method("set_wrapper_attr", "t_start", clock_start, force=False)
         self._clock_start = clock_start
 
-    def _check(self, network: NetworkSpec) -> None:
-        for name in ("observation_space", "action_space"):
-            ours, theirs = getattr(self.env, name), getattr(network, name)
-            if ours != theirs:
-                raise ValueError(
-                    f"The worker's env has {name} {ours}, but the policy was built for {theirs}: give the "
-                    "evaluator the same env (and wrappers) as the model."
-                )
-
     def run(
         self,
         payload: dict[str, Any],
@@ -155,7 +146,6 @@ class ShareRunner:
             ``terminal_observation``) and the timings (in the engine, of which lingering).
         """
         network: NetworkSpec = payload["network"]
-        self._check(network)
         self._set_clock(payload["clock_start"])
         center = payload["center"]
         candidates = jobs % payload["n_candidates"]

@@ -20,10 +20,23 @@ from sb3_es.common.population_algorithm import (
 )
 from sb3_es.evaluation import PopulationEvaluator
 from sb3_es.openes.policies import FlatPolicy
+from sb3_es.strategies.base import check_count
 from sb3_es.strategies.openes import FitnessShaping, OpenESStrategy
 from sb3_es.strategies.optimizers import OptimizerName
 
 SelfOpenES = TypeVar("SelfOpenES", bound="OpenES")
+
+
+def check_decays(sigma: Any, sigma_decay: float, learning_rate: Any, learning_rate_decay: float) -> None:
+    """:raises ValueError: For a decay outside (0, 1], or one given with a schedule (which sets the value itself)."""
+    for name, value, rate in (("sigma", sigma, sigma_decay), ("learning_rate", learning_rate, learning_rate_decay)):
+        if not 0 < rate <= 1:
+            raise ValueError(f"{name}_decay={rate}: it must be in (0, 1].")
+        if callable(value) and rate != 1:
+            raise ValueError(
+                f"{name}_decay={rate} decays a float {name}, but {name} is a schedule, which sets every "
+                f"generation's value itself: put the decay into the schedule, or pass a float {name}."
+            )
 
 
 class OpenES(PopulationAlgorithm):
@@ -113,19 +126,9 @@ class OpenES(PopulationAlgorithm):
         check_non_negative("weight_decay", weight_decay)
         if not 0 <= momentum < 1:
             raise ValueError(f"momentum={momentum}: the SGD momentum must be in [0, 1).")
-        for name, value, rate in (
-            ("sigma", sigma, sigma_decay),
-            ("learning_rate", learning_rate, learning_rate_decay),
-        ):
-            if not 0 < rate <= 1:
-                raise ValueError(f"{name}_decay={rate}: it must be in (0, 1].")
-            if callable(value) and rate != 1:
-                raise ValueError(
-                    f"{name}_decay={rate} decays a float {name}, but {name} is a schedule, which sets every "
-                    f"generation's value itself: put the decay into the schedule, or pass a float {name}."
-                )
+        check_decays(sigma, sigma_decay, learning_rate, learning_rate_decay)
         super().__init__(**base_arguments(super().__init__, locals()))
-        self.population_size = population_size
+        self.population_size = check_count("population_size", population_size, 2)
         self.sigma = sigma
         self.sigma_decay = sigma_decay
         self.sigma_limit = sigma_limit
@@ -141,6 +144,10 @@ class OpenES(PopulationAlgorithm):
         self.noise_table_size = check_noise_table_size(noise_table_size)
         if _init_setup_model:
             self._setup_model()
+
+    def _apply_hyperparameters(self, changed: dict[str, Any]) -> None:
+        check_decays(self.sigma, self.sigma_decay, self.learning_rate, self.learning_rate_decay)
+        super()._apply_hyperparameters(changed)
 
     def _make_strategy(self, center: np.ndarray, seed: np.random.SeedSequence) -> OpenESStrategy:
         return OpenESStrategy(

@@ -12,6 +12,7 @@ from sb3_es.common.arguments import base_arguments
 from sb3_es.common.population_algorithm import PopulationAlgorithm, check_positive
 from sb3_es.evaluation import PopulationEvaluator
 from sb3_es.pgpe.policies import FlatPolicy
+from sb3_es.strategies.base import check_count
 from sb3_es.strategies.fitness import FitnessShaping
 from sb3_es.strategies.optimizers import OptimizerName
 from sb3_es.strategies.pgpe import PGPEStrategy
@@ -104,7 +105,7 @@ class PGPE(PopulationAlgorithm):
     ) -> None:
         check_step_sizes(optimizer, max_speed, center_learning_rate)
         super().__init__(**base_arguments(super().__init__, locals()))
-        self.population_size = population_size
+        self.population_size = check_count("population_size", population_size, 2)
         self.stdev_init = stdev_init
         self.max_speed = max_speed
         self.center_learning_rate = center_learning_rate

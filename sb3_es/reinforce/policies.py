@@ -141,6 +141,11 @@ class DiscretizedPolicy(ActorCriticPolicy):
             )
         self.policy_net_arch = [64, 64] if pi_arch is None else pi_arch
         self.value_net_arch = vf_arch if value_net_arch is None else layer_sizes(value_net_arch, "value_net_arch")
+        if value_net_arch and not use_baseline:
+            raise ValueError(
+                f"value_net_arch={value_net_arch!r} gives the layers of REINFORCE's baseline, which is off: pass "
+                "use_baseline=True to REINFORCE, or drop value_net_arch."
+            )
         # Set before ActorCriticPolicy.__init__, which calls _build.
         self.n_bins = int(n_bins)
         self.joint = bool(joint)

@@ -19,6 +19,7 @@ from sb3_es.common.population_algorithm import (
 )
 from sb3_es.evaluation import PopulationEvaluator
 from sb3_es.simple_es.policies import FlatPolicy
+from sb3_es.strategies.base import check_count
 from sb3_es.strategies.simple_es import EliteWeights, SimpleESStrategy
 
 SelfSimpleES = TypeVar("SelfSimpleES", bound="SimpleES")
@@ -72,9 +73,9 @@ class SimpleES(PopulationAlgorithm):
     ) -> None:
         check_positive("sigma", sigma)
         super().__init__(**base_arguments(super().__init__, locals()))
-        self.population_size = population_size
+        self.population_size = check_count("population_size", population_size, 2)
         self.sigma = sigma
-        self.n_elite = n_elite
+        self.n_elite = check_count("n_elite", n_elite)
         self.weights: EliteWeights = weights
         self.noise_table_size = check_noise_table_size(noise_table_size)
         if _init_setup_model:

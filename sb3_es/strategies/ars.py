@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import numbers
+
 import numpy as np
 
-from sb3_es.strategies.base import Population, Strategy, check_positive_number, mirrored_groups
+from sb3_es.strategies.base import Population, Strategy, check_count, check_positive_number, mirrored_groups
 from sb3_es.strategies.noise import NoiseTablePopulation, SharedNoiseTable
 
 
@@ -49,10 +51,10 @@ class ARSStrategy(Strategy):
         self._deltas: np.ndarray | None = None
 
     def check_settings(self) -> None:
-        if int(self.n_delta) != self.n_delta or self.n_delta < 1:
-            raise ValueError(f"n_delta={self.n_delta}: it must be a positive integer.")
-        if int(self.n_top) != self.n_top or not 1 <= self.n_top <= self.n_delta:
-            raise ValueError(f"n_top={self.n_top} must be between 1 and n_delta={self.n_delta}.")
+        self.n_delta = check_count("n_delta", self.n_delta)
+        if not (isinstance(self.n_top, numbers.Real) and 1 <= self.n_top <= self.n_delta):
+            raise ValueError(f"n_top={self.n_top!r} must be between 1 and n_delta={self.n_delta}.")
+        self.n_top = check_count("n_top", self.n_top)
         for name, value in (("delta_std", self.delta_std), ("learning_rate", self.learning_rate)):
             check_positive_number(name, value)
 

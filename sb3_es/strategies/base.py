@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+import numbers
 from abc import ABC, abstractmethod
 from typing import Any, ClassVar
 
@@ -152,6 +154,22 @@ def mirrored_groups(n_candidates: int) -> np.ndarray:
         members of an antithetic pair the same env seed.
     """
     return np.tile(np.arange(n_candidates // 2, dtype=np.int64), 2)
+
+
+def check_count(name: str, value: Any, minimum: int = 1) -> int:
+    """
+    :param name: Hyperparameter name, for the message.
+    :param value: A count: an integer, or a float with a whole value (as YAML files and rl-zoo's ``-params`` give).
+    :param minimum: Its smallest valid value.
+    :return: The count as an ``int``.
+    :raises ValueError: Naming ``name`` when ``value`` is not a whole number of at least ``minimum``.
+    """
+    number = float(value) if isinstance(value, numbers.Real) and not isinstance(value, bool) else math.nan
+    if not number.is_integer():
+        raise ValueError(f"{name}={value!r}: it must be a whole number (at least {minimum}).")
+    if number < minimum:
+        raise ValueError(f"{name}={value!r}: it must be at least {minimum}.")
+    return int(number)
 
 
 def check_positive_number(name: str, value: float) -> None:

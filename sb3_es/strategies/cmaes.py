@@ -15,7 +15,7 @@ with warnings.catch_warnings():  # pycma warns at import when matplotlib (only u
     warnings.simplefilter("ignore")
     import cma
 
-from sb3_es.strategies.base import Strategy
+from sb3_es.strategies.base import Strategy, check_count
 
 Restarts = Literal["ipop", "bipop"] | None
 
@@ -90,14 +90,15 @@ class CMAESStrategy(Strategy):
         super().__init__(center, seed)
         if not (np.isfinite(sigma) and sigma > 0):
             raise ValueError(f"sigma={sigma}: the initial step size must be positive.")
-        if population_size is not None and population_size < 2:
-            raise ValueError(f"population_size={population_size}: it must be at least 2 (or None for pycma's).")
+        if population_size is not None:
+            population_size = check_count("population_size", population_size, 2)
         if restarts not in (None, "ipop", "bipop"):
             raise ValueError(f"restarts={restarts!r}: choose None, 'ipop' or 'bipop'.")
         self.sigma0 = float(sigma)
         self.diagonal = diagonal
         self.restarts = restarts
         self.max_restarts = max_restarts
+        self.check_settings()
         self.cma_options = dict(cma_options or {})
         for key in ("popsize", "seed", "CMA_diagonal", "randn"):
             if key in self.cma_options:
@@ -123,6 +124,9 @@ class CMAESStrategy(Strategy):
                 "on the last mean shift, and it adds a mirrored candidate. Use population_size >= "
                 f"{self.min_population_size}, or None for pycma's default ({self.default_population_size})."
             )
+
+    def check_settings(self) -> None:
+        self.max_restarts = check_count("max_restarts", self.max_restarts, 0)
 
     @contextlib.contextmanager
     def _private_random(self) -> Iterator[None]:

@@ -6,7 +6,7 @@ from typing import Any
 
 import numpy as np
 
-from sb3_es.strategies.base import Population, check_positive_number, mirrored_groups
+from sb3_es.strategies.base import Population, check_count, check_positive_number, mirrored_groups
 from sb3_es.strategies.fitness import FitnessShaping, centered_ranks, shape_fitness
 from sb3_es.strategies.noise import NoiseTablePopulation, SharedNoiseTable
 from sb3_es.strategies.optimizers import GradientStrategy, OptimizerName
@@ -92,8 +92,8 @@ class OpenESStrategy(GradientStrategy):
         self._noise: np.ndarray | None = None
 
     def check_settings(self) -> None:
-        population_size = self.population_size
-        if int(population_size) != population_size or population_size < 2 or (self.antithetic and population_size % 2):
+        population_size = self.population_size = check_count("population_size", self.population_size, 2)
+        if self.antithetic and population_size % 2:
             raise ValueError(
                 f"population_size={population_size}: it must be at least 2, and even with antithetic sampling."
             )

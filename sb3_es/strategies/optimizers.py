@@ -100,6 +100,8 @@ def make_optimizer(
     if name == "adam":
         return th.optim.Adam(params, lr=learning_rate, betas=betas)
     if name == "sgd":
+        if not 0 <= momentum < 1:
+            raise ValueError(f"momentum={momentum}: the SGD momentum must be in [0, 1).")
         return th.optim.SGD(params, lr=learning_rate, momentum=momentum)
     if name == "clipup":
         return ClipUp(params, lr=learning_rate, max_speed=max_speed, momentum=momentum)

@@ -6,7 +6,7 @@ from typing import Any
 
 import numpy as np
 
-from sb3_es.strategies.base import check_positive_number, mirrored_groups
+from sb3_es.strategies.base import check_count, check_positive_number, mirrored_groups
 from sb3_es.strategies.fitness import FitnessShaping, shape_fitness
 from sb3_es.strategies.optimizers import GradientStrategy, OptimizerName
 
@@ -75,8 +75,8 @@ class PGPEStrategy(GradientStrategy):
         self._scaled_noise: np.ndarray | None = None
 
     def check_settings(self) -> None:
-        population_size = self.population_size
-        if int(population_size) != population_size or population_size < 2 or population_size % 2:
+        population_size = self.population_size = check_count("population_size", self.population_size, 2)
+        if population_size % 2:
             raise ValueError(f"population_size={population_size}: it must be even (symmetric pairs) and at least 2.")
         if not self.stdev_learning_rate >= 0:
             raise ValueError(f"stdev_learning_rate={self.stdev_learning_rate}: it must be >= 0 (0 keeps stdev fixed).")

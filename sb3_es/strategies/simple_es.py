@@ -6,7 +6,7 @@ from typing import Literal
 
 import numpy as np
 
-from sb3_es.strategies.base import Population, Strategy, check_positive_number
+from sb3_es.strategies.base import Population, Strategy, check_count, check_positive_number
 from sb3_es.strategies.noise import NoiseTablePopulation, SharedNoiseTable
 
 EliteWeights = Literal["equal", "linear", "log"]
@@ -75,13 +75,13 @@ class SimpleESStrategy(Strategy):
         self.n_elite = n_elite
         self.check_settings()
         self.weights: EliteWeights = weights
-        self.elite_weights = elite_weights(n_elite, weights)
+        self.elite_weights = elite_weights(self.n_elite, weights)
         self.noise_table = noise_table
 
     def check_settings(self) -> None:
-        if int(self.population_size) != self.population_size or self.population_size < 2:
-            raise ValueError(f"population_size={self.population_size}: it must be at least 2.")
-        if not 1 <= self.n_elite <= self.population_size:
+        self.population_size = check_count("population_size", self.population_size, 2)
+        self.n_elite = check_count("n_elite", self.n_elite)
+        if self.n_elite > self.population_size:
             raise ValueError(f"n_elite={self.n_elite} must be between 1 and population_size={self.population_size}.")
         check_positive_number("sigma", self.sigma)
 
