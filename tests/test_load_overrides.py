@@ -6,6 +6,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.env_util import make_vec_env
@@ -148,6 +149,33 @@ def test_values_checked_by_a_strategy_or_with_the_schedules_are_refused_on_load(
     model.save(tmp_path / "openes.zip")
     with pytest.raises(ValueError, match=r"sigma_decay=0.5 decays a float sigma, but sigma is a schedule"):
         OpenES.load(tmp_path / "openes.zip", sigma_decay=0.5)
+
+
+def test_load_takes_what_the_constructor_takes(tmp_path: Path) -> None:
+    path = saved(ARS, tmp_path)
+    model = ARS.load(path, reward_clip=np.array([-1.0, 1.0]), max_episode_steps=500.0, n_delta=2, n_top=None)
+    assert model.reward_clip == (-1.0, 1.0) and type(model.max_episode_steps) is int and model.strategy.n_top == 2
+    cmaes = saved(CMAES, tmp_path)
+    for value in (-1, 2.5):
+        with pytest.raises(ValueError) as from_load:
+            CMAES.load(cmaes, max_restarts=value)
+        with pytest.raises(ValueError) as from_constructor:
+            CMAES("MlpPolicy", "Pendulum-v1", max_restarts=value)
+        assert str(from_load.value) == str(from_constructor.value)
+
+
+def test_saves_from_before_the_checks_still_load(tmp_path: Path) -> None:
+    # Combinations the constructors now refuse, which older versions saved: a REINFORCE value_net_arch without a
+    # baseline (it built none), an OpenES decay beside a schedule (the decay did nothing).
+    reinforce = REINFORCE("MlpPolicy", "CartPole-v1", n_episodes=2)
+    reinforce.policy_kwargs["value_net_arch"] = [8]
+    reinforce.save(tmp_path / "reinforce.zip")
+    assert REINFORCE.load(tmp_path / "reinforce.zip").policy.value_net_arch == [8]
+    openes = OpenES("MlpPolicy", "Pendulum-v1", population_size=4, learning_rate=lambda progress: 0.01 * progress)
+    openes.learning_rate_decay = 0.9
+    openes.save(tmp_path / "openes.zip")
+    OpenES.load(tmp_path / "openes.zip", env=make_vec_env("Pendulum-v1")).learn(1)
+    assert OpenES.load(tmp_path / "openes.zip", learning_rate_decay=1.0).learning_rate_decay == 1.0
 
 
 def test_the_saved_stats_window_size_is_no_change(tmp_path: Path) -> None:

@@ -52,6 +52,8 @@ def test_shaping_order_terminal_then_clip_then_offset() -> None:
         (dict(reward_clip=[0, "1"]), "two finite numbers"),
         (dict(reward_clip=(True, 2)), "two finite numbers"),
         (dict(terminal_reward=float("nan")), "terminal_reward=nan"),
+        (dict(terminal_reward="5"), "terminal_reward='5'"),
+        (dict(alive_bonus_offset=True), "alive_bonus_offset=True"),
     ],
 )
 def test_bad_shaping_is_refused_at_construction(kwargs: dict[str, Any], message: str) -> None:

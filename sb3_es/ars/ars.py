@@ -86,6 +86,12 @@ class ARS(PopulationAlgorithm):
         if _init_setup_model:
             self._setup_model()
 
+    def _apply_hyperparameters(self, changed: dict[str, Any]) -> None:
+        if "n_top" in changed and changed["n_top"] is None:  # as in the constructor: every direction
+            self.n_top = self.n_delta
+            changed = {**changed, "n_top": self.n_delta}
+        super()._apply_hyperparameters(changed)
+
     def _make_strategy(self, center: np.ndarray, seed: np.random.SeedSequence) -> ARSStrategy:
         return ARSStrategy(
             center,

@@ -11,7 +11,6 @@ from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback
 
 from sb3_es.cmaes.policies import FlatPolicy
 from sb3_es.common.arguments import base_arguments
-from sb3_es.common.checks import check_non_negative
 from sb3_es.common.population_algorithm import PopulationAlgorithm, check_positive
 from sb3_es.evaluation import PopulationEvaluator
 from sb3_es.strategies.base import check_count
@@ -72,7 +71,6 @@ class CMAES(PopulationAlgorithm):
         _init_setup_model: bool = True,
     ) -> None:
         check_positive("sigma", sigma)
-        check_non_negative("max_restarts", max_restarts, integer=True)
         if diagonal not in (True, False, "auto"):
             raise ValueError(f"diagonal={diagonal!r}: choose True, False or 'auto'.")
         super().__init__(**base_arguments(super().__init__, locals()))
@@ -80,7 +78,7 @@ class CMAES(PopulationAlgorithm):
         self.population_size = None if population_size is None else check_count("population_size", population_size, 2)
         self.diagonal = diagonal
         self.restarts = restarts
-        self.max_restarts = int(max_restarts)
+        self.max_restarts = check_count("max_restarts", max_restarts, 0)
         self.cma_options = cma_options
         if _init_setup_model:
             self._setup_model()

@@ -10,6 +10,7 @@ import warnings
 from typing import Any, ClassVar, TypeVar
 
 import gymnasium as gym
+import numpy as np
 import torch as th
 from stable_baselines3.common.base_class import BaseAlgorithm, maybe_make_env
 from stable_baselines3.common.env_util import is_wrapped
@@ -40,10 +41,11 @@ def constant_value(value: Any) -> Any:
     return value.val if isinstance(value, ConstantSchedule) else value
 
 
-def _as_saved_type(value: Any, saved: Any) -> Any:
-    """:return: ``value``, an ``int`` where the saved value is one and ``value`` a whole float (YAML's ``4.0``)."""
+def _as_count(value: Any, annotation: Any) -> Any:
+    """:return: ``value``, an ``int`` where the argument is a count (annotated ``int``) and ``value`` a whole float
+    (YAML's ``4.0``), as the constructors take it."""
     whole = isinstance(value, float) and value.is_integer()
-    return int(value) if whole and isinstance(saved, int) and not isinstance(saved, bool) else value
+    return int(value) if whole and annotation in ("int", "int | None") else value
 
 
 #: Marks a constructor argument that the save does not hold.
@@ -52,6 +54,8 @@ _MISSING = object()
 
 def _frozen(value: Any) -> Any:
     """:return: ``value`` with lists as tuples, to compare a value given to ``load()`` with the saved one."""
+    if isinstance(value, np.ndarray):
+        value = value.tolist()
     return tuple(_frozen(v) for v in value) if isinstance(value, (list, tuple)) else value
 
 
@@ -252,7 +256,11 @@ class ESBaseAlgorithm(BaseAlgorithm):
         """
         data, _ = check_save_file(path, cls.__name__, custom_objects)
         cls._check_save_data(path, data)
-        kwargs = {key: _as_saved_type(constant_value(value), data.get(key)) for key, value in kwargs.items()}
+        signature = inspect.signature(cls.__init__).parameters
+        kwargs = {
+            key: _as_count(constant_value(value), getattr(signature.get(key), "annotation", None))
+            for key, value in kwargs.items()
+        }
         changed = cls._changed_hyperparameters(data, kwargs)
         if isinstance(device, str) and device == "auto":
             device = cls._auto_device

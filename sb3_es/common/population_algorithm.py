@@ -130,8 +130,8 @@ class PopulationAlgorithm(StrategyAlgorithm):
             check_positive("learning_rate", learning_rate)
         self.n_eval_episodes = int(n_eval_episodes)
         self.common_seeds = bool(common_seeds)
-        self.alive_bonus_offset = float(alive_bonus_offset)
-        shaping = RewardShaping.create(reward_clip, terminal_reward, self.alive_bonus_offset)
+        shaping = RewardShaping.create(reward_clip, terminal_reward, alive_bonus_offset)
+        self.alive_bonus_offset = shaping.alive_bonus_offset
         self.reward_clip = shaping.reward_clip
         self.terminal_reward = shaping.terminal_reward
         self.zero_policy = zero_policy
@@ -159,6 +159,7 @@ class PopulationAlgorithm(StrategyAlgorithm):
     def _apply_hyperparameters(self, changed: dict[str, Any]) -> None:
         shaping = self.reward_shaping  # checks reward_clip, terminal_reward and alive_bonus_offset
         self.reward_clip, self.terminal_reward = shaping.reward_clip, shaping.terminal_reward
+        self.alive_bonus_offset = shaping.alive_bonus_offset
         super()._apply_hyperparameters(changed)
 
     def _excluded_save_params(self) -> list[str]:

@@ -17,7 +17,7 @@ from sb3_es.common.base_class import ESBaseAlgorithm
 from sb3_es.common.checks import check_positive, check_scheduled_value
 from sb3_es.common.policies import FlatPolicy
 from sb3_es.strategies import Strategy
-from sb3_es.strategies.base import Population
+from sb3_es.strategies.base import Population, check_count
 from sb3_es.strategies.noise import SharedNoiseTable
 
 
@@ -34,9 +34,7 @@ def check_noise_table_size(size: int | None) -> int | None:
     :param size: ``noise_table_size`` of an algorithm: a positive number of float32 values, or ``None``.
     :return: ``size``, once checked.
     """
-    if size is not None and int(size) < 1:
-        raise ValueError(f"noise_table_size={size}: use a positive size or None.")
-    return size
+    return None if size is None else check_count("noise_table_size", size)
 
 
 def make_noise_table(size: int | None, seed: np.random.SeedSequence) -> SharedNoiseTable | None:

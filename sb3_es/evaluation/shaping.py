@@ -11,6 +11,11 @@ from typing import Any
 import numpy as np
 
 
+def _finite_number(value: Any) -> bool:
+    """:return: Whether ``value`` is a finite real number (not a bool, not a string)."""
+    return isinstance(value, numbers.Real) and not isinstance(value, bool) and math.isfinite(value)
+
+
 @dataclass(frozen=True)
 class RewardShaping:
     """
@@ -53,16 +58,16 @@ class RewardShaping:
                 values = reward_clip.ravel().tolist()
             elif isinstance(reward_clip, Sequence) and not isinstance(reward_clip, str):
                 values = list(reward_clip)
-            finite = all(isinstance(v, numbers.Real) and not isinstance(v, bool) and math.isfinite(v) for v in values)
+            finite = all(_finite_number(v) for v in values)
             if len(values) != 2 or not finite or values[0] >= values[1]:
                 raise ValueError(
                     f"reward_clip={reward_clip!r}: give two finite numbers (low, high) with low < high, e.g. "
                     "reward_clip=(-1, 1), or None for no clipping."
                 )
             clip = (float(values[0]), float(values[1]))
-        if terminal_reward is not None and not np.isfinite(float(terminal_reward)):
+        if terminal_reward is not None and not _finite_number(terminal_reward):
             raise ValueError(f"terminal_reward={terminal_reward!r}: give a finite number, or None to keep the env's.")
-        if not np.isfinite(float(alive_bonus_offset)):
+        if not _finite_number(alive_bonus_offset):
             raise ValueError(f"alive_bonus_offset={alive_bonus_offset!r}: give a finite number (0 for none).")
         return cls(clip, None if terminal_reward is None else float(terminal_reward), float(alive_bonus_offset))
 

@@ -59,7 +59,8 @@ class VecEnvEvaluator(PopulationEvaluator):
             if ours != theirs:
                 raise ValueError(
                     f"The evaluator's env has {name} {ours}, but the policy was built for {theirs}: give the "
-                    "evaluator the same env (and wrappers) as the model."
+                    "evaluator the same env (and wrappers) as the model. (SB3 wraps a model env with image "
+                    "observations in VecTransposeImage: wrap the evaluator's env in it too.)"
                 )
         reset_seeds = generation.reset_seeds
         if reset_seeds is not None and not can_reset_slots(env):

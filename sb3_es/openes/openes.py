@@ -124,8 +124,6 @@ class OpenES(PopulationAlgorithm):
         for name, limit in (("sigma_limit", sigma_limit), ("learning_rate_limit", learning_rate_limit)):
             check_non_negative(name, limit)
         check_non_negative("weight_decay", weight_decay)
-        if not 0 <= momentum < 1:
-            raise ValueError(f"momentum={momentum}: the SGD momentum must be in [0, 1).")
         check_decays(sigma, sigma_decay, learning_rate, learning_rate_decay)
         super().__init__(**base_arguments(super().__init__, locals()))
         self.population_size = check_count("population_size", population_size, 2)
@@ -146,7 +144,9 @@ class OpenES(PopulationAlgorithm):
             self._setup_model()
 
     def _apply_hyperparameters(self, changed: dict[str, Any]) -> None:
-        check_decays(self.sigma, self.sigma_decay, self.learning_rate, self.learning_rate_decay)
+        # Only when one of them changes: a save from before version 2 may hold a decay beside a schedule.
+        if changed.keys() & {"sigma", "sigma_decay", "learning_rate", "learning_rate_decay"}:
+            check_decays(self.sigma, self.sigma_decay, self.learning_rate, self.learning_rate_decay)
         super()._apply_hyperparameters(changed)
 
     def _make_strategy(self, center: np.ndarray, seed: np.random.SeedSequence) -> OpenESStrategy:

@@ -36,6 +36,7 @@ from sb3_es.common.arguments import base_arguments
 from sb3_es.common.net_arch import layer_sizes, split_net_arch
 from sb3_es.evaluation.network import flat_obs_dim
 from sb3_es.reinforce.legacy import upgrade_legacy_state_dict
+from sb3_es.strategies.base import check_count
 
 #: Default limit on the number of joint actions (``n_bins ** action_dim``).
 MAX_JOINT_ACTIONS = 100_000
@@ -141,15 +142,10 @@ class DiscretizedPolicy(ActorCriticPolicy):
             )
         self.policy_net_arch = [64, 64] if pi_arch is None else pi_arch
         self.value_net_arch = vf_arch if value_net_arch is None else layer_sizes(value_net_arch, "value_net_arch")
-        if value_net_arch and not use_baseline:
-            raise ValueError(
-                f"value_net_arch={value_net_arch!r} gives the layers of REINFORCE's baseline, which is off: pass "
-                "use_baseline=True to REINFORCE, or drop value_net_arch."
-            )
         # Set before ActorCriticPolicy.__init__, which calls _build.
         self.n_bins = int(n_bins)
         self.joint = bool(joint)
-        self.max_joint_actions = int(max_joint_actions)
+        self.max_joint_actions = check_count("max_joint_actions", max_joint_actions)
         self.use_baseline = bool(use_baseline)
         self.index_space = self._make_index_space(action_space)
         if features_extractor_class is None:

@@ -147,6 +147,12 @@ class REINFORCE(ESBaseAlgorithm):
         )
         if policy_kwargs is not None and "use_baseline" in policy_kwargs:
             raise ValueError("Pass use_baseline to REINFORCE, not in policy_kwargs.")
+        value_net_arch = (policy_kwargs or {}).get("value_net_arch")
+        if value_net_arch and not use_baseline:  # checked here, not in the policy: saves from before still load
+            raise ValueError(
+                f"value_net_arch={value_net_arch!r} gives the layers of REINFORCE's baseline, which is off: pass "
+                "use_baseline=True to REINFORCE, or drop value_net_arch."
+            )
         if env is not None and not isinstance(env, str) and hasattr(env, "action_space"):
             check_action_space(env.action_space)
         super().__init__(**base_arguments(super().__init__, locals()))

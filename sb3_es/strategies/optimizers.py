@@ -95,13 +95,13 @@ def make_optimizer(
     :param max_speed: ClipUp's largest step (``None``: ``2 * learning_rate``); only for ClipUp.
     :return: The optimizer.
     """
+    if not 0 <= momentum < 1:  # checked whichever optimizer, as a value that is not used is still a mistake
+        raise ValueError(f"momentum={momentum}: the SGD and ClipUp momentum must be in [0, 1).")
     if max_speed is not None and name != "clipup":
         raise ValueError(f"max_speed={max_speed} is a ClipUp setting; it has no effect with optimizer={name!r}.")
     if name == "adam":
         return th.optim.Adam(params, lr=learning_rate, betas=betas)
     if name == "sgd":
-        if not 0 <= momentum < 1:
-            raise ValueError(f"momentum={momentum}: the SGD momentum must be in [0, 1).")
         return th.optim.SGD(params, lr=learning_rate, momentum=momentum)
     if name == "clipup":
         return ClipUp(params, lr=learning_rate, max_speed=max_speed, momentum=momentum)
