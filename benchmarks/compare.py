@@ -839,6 +839,50 @@ def parse_thresholds(items: list[str]) -> dict[str, float]:
     return thresholds
 
 
+def check_run_arguments(args: argparse.Namespace, thresholds: dict[str, float], overrides: dict[str, Any]) -> None:
+    """
+    Refuse, with a message naming the flag, what a run would otherwise ignore or misread.
+
+    :param args: The parsed arguments (not ``--report-only``).
+    :param thresholds: Parsed ``--threshold`` values.
+    :param overrides: Parsed ``--override`` values.
+    """
+    problems = []
+    for flag, value, low in (
+        ("--steps", args.steps, 1),
+        ("--seconds", args.seconds, 1e-9),
+        ("--eval-freq", args.eval_freq, 0),
+        ("--eval-episodes", args.eval_episodes, 1),
+        ("--eval-envs", args.eval_envs, 1),
+        ("--confirm-episodes", args.confirm_episodes, 0),
+    ):
+        if value is not None and value < low:
+            problems.append(f"{flag} {value}: it must be {'positive' if low > 0 else '0 or more'}")
+    repeated = sorted({seed for seed in args.seeds if args.seeds.count(seed) > 1})
+    if repeated:
+        problems.append(f"--seeds repeats {repeated}: each seed is one run (and one run folder)")
+    unknown_envs = sorted(set(thresholds) - set(args.envs))
+    if unknown_envs:
+        problems.append(f"--threshold for {unknown_envs}, which --envs {args.envs} does not run")
+    unknown_algos = sorted(set(overrides) - set(args.algos))
+    if unknown_algos:
+        problems.append(f"--override for {unknown_algos}, which --algos {args.algos} does not run")
+    if args.steps is not None and any("n_timesteps" in values for values in overrides.values()):
+        problems.append("--override ...:n_timesteps with --steps: --steps sets every run's budget; give one of them")
+    missing = [algo for algo in args.algos if algo not in rl_zoo3.ALGOS]
+    if missing:
+        problems.append(f"--algos {missing}: unknown or unavailable (known: {sorted(rl_zoo3.ALGOS)})")
+    if args.continue_from is not None:
+        # A run folder of this script, <algo>/<env>_1_seed<s>, names the env the model was trained on.
+        trained = re.fullmatch(r"(.+)_\d+_seed\d+", args.continue_from.parent.name)
+        if trained and trained.group(1) not in [env_slug(env_id) for env_id in args.envs]:
+            problems.append(
+                f"--continue-from {args.continue_from} was trained on {trained.group(1)}, not on --envs {args.envs}"
+            )
+    if problems:
+        raise SystemExit("compare.py: " + "; ".join(problems) + ".")
+
+
 def main(argv: list[str] | None = None) -> Path:
     """
     Run the comparison and write the report.
@@ -886,7 +930,11 @@ def main(argv: list[str] | None = None) -> Path:
     )
     parser.add_argument("--skip-existing", action="store_true", help="skip runs that already have a summary.json")
     parser.add_argument("--keep-going", action="store_true", help="record a failed run and go on with the others")
-    parser.add_argument("--report-only", action="store_true", help="only redraw plots and table from existing runs")
+    parser.add_argument(
+        "--report-only",
+        action="store_true",
+        help="only redraw plots and table, from every run in --out (--algos, --envs, --seeds and budgets unused)",
+    )
     parser.add_argument(
         "--num-threads",
         type=int,
@@ -923,13 +971,12 @@ def main(argv: list[str] | None = None) -> Path:
             raise SystemExit("Give a budget: --steps N (env steps), --seconds S (training wall-clock), or both.")
         if args.confirm_episodes and not args.stop_at_threshold:
             raise SystemExit("--confirm-episodes confirms --stop-at-threshold's threshold: add it, with --threshold.")
+        if args.stop_at_threshold and not thresholds:
+            raise SystemExit("--stop-at-threshold stops at a --threshold ENV_ID=RETURN: give one.")
+        check_run_arguments(args, thresholds, overrides)
         if args.num_threads > 0:
             torch.set_num_threads(args.num_threads)
-        algos = rl_zoo3.ALGOS
-        missing = [a for a in args.algos if a not in algos]
-        if missing:
-            print(f"Skipping unknown or unavailable algorithms: {missing} (known: {sorted(algos)})")
-        plan = [(e, a, s) for e in args.envs for a in args.algos if a in algos for s in args.seeds]
+        plan = [(e, a, s) for e in args.envs for a in args.algos for s in args.seeds]
         if args.continue_from is not None and len(plan) != 1:
             raise SystemExit(
                 f"--continue-from trains one model on: give one algorithm, env and seed (the plan has {len(plan)})."

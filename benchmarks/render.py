@@ -230,6 +230,9 @@ def main(argv: list[str] | None = None) -> Path:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--stochastic", action="store_true", help="sample actions instead of deterministic ones")
     args = parser.parse_args(argv)
+    for flag in ("steps", "episodes", "fps", "every"):
+        if getattr(args, flag) < 1:
+            parser.error(f"--{flag} {getattr(args, flag)}: it must be at least 1.")
     if not args.model.is_file():
         raise SystemExit(f"No model file {args.model}.")
     register_envs()

@@ -118,7 +118,7 @@ def run_entry(
     :return: The compare.py command.
     """
     steps = int(float(entry["n_timesteps"]))
-    if args.max_steps:
+    if args.max_steps is not None:
         steps = min(steps, args.max_steps)
     command = [
         sys.executable,
@@ -142,7 +142,7 @@ def run_entry(
         "--skip-existing",
         "--keep-going",
     ]
-    if args.max_seconds:
+    if args.max_seconds is not None:
         command += ["--seconds", str(args.max_seconds)]
     if threshold is not None:
         command += ["--threshold", f"{env_id}={threshold:g}", "--stop-at-threshold"]
@@ -310,9 +310,26 @@ def main(argv: list[str] | None = None) -> str:
         if not sep:
             raise SystemExit(f"--threshold {item!r}: use ENV_ID=VALUE, e.g. Pendulum-v1=-200")
         given[env_id] = float(value)
+    problems = [
+        f"{flag} {value}: it must be positive"
+        for flag, value in (("--max-steps", args.max_steps), ("--max-seconds", args.max_seconds))
+        if value is not None and value <= 0
+    ]
+    unknown_algos = sorted(set(args.algos) - set(sb3_es_algos()))
+    if unknown_algos:
+        problems.append(f"--algos {unknown_algos}: not sb3-es algorithms (known: {sorted(sb3_es_algos())})")
+    repeated = sorted({seed for seed in args.seeds if args.seeds.count(seed) > 1})
+    if repeated:
+        problems.append(f"--seeds repeats {repeated}")
+    unknown_envs = sorted(set(given) - set(args.envs))
+    if unknown_envs:
+        problems.append(f"--threshold for {unknown_envs}, which --envs does not select")
+    if problems:
+        raise SystemExit("verify_configs.py: " + "; ".join(problems) + ".")
     selected = entries(args.algos, args.envs)
-    if not selected:
-        raise SystemExit(f"No entry for {args.envs} in the packaged files of {args.algos}.")
+    without = [env_id for env_id in args.envs if env_id not in {env for _, env, _ in selected}]
+    if without:
+        raise SystemExit(f"No entry for {without} in the packaged files of {args.algos}: check the env ids.")
     rows, comments = [], []
     for algo, env_id, entry in selected:
         threshold = threshold_for(env_id, given)

@@ -114,6 +114,8 @@ def main(argv: Sequence[str] | None = None) -> None:
         parser.add_argument("-f", "--log-folder", "--log-dir", default="runs", help="TensorBoard run and model")
         parser.add_argument("--seed", type=int, default=QUICKSTART["seed"])
         options = parser.parse_args(args[1:])
+        if options.n_timesteps < 1:
+            parser.error(f"-n {options.n_timesteps}: give a positive number of env steps.")
         quickstart(options.n_timesteps, options.log_folder, options.seed)
         return
     check_former_flags(args[1:])

@@ -60,3 +60,20 @@ def test_unknown_algorithm() -> None:
     pytest.importorskip("rl_zoo3")
     with pytest.raises(SystemExit):  # rl-zoo's own argparse error: invalid choice 'nope'
         main(["train", "--algo", "nope", "--env", "CartPole-v1"])
+
+
+def test_quickstart_refuses_a_budget_below_one(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit):
+        main(["quickstart", "-n", "-5"])
+    assert "-n -5: give a positive number of env steps" in capsys.readouterr().err
+
+
+def test_abbreviated_and_attached_options_are_read_as_rl_zoo_reads_them() -> None:
+    pytest.importorskip("rl_zoo3")
+    from sb3_es.zoo.commands import prepare_args
+
+    args = prepare_args("train", ["--alg", "ars_es", "--env", "CartPole-v1"])
+    assert args[-2] == "--conf-file" and args[-1].endswith("ars_es.yml")  # the packaged file, as with --algo
+    assert prepare_args("enjoy", ["--algo", "ars_es", "--env", "CartPole-v1", "-f/tmp/logs"])[-1] == "-f/tmp/logs"
+    with pytest.raises(Exception, match="--algo ars is sb3-contrib's ARS"):
+        prepare_args("train", ["--alg", "ars", "--env", "CartPole-v1"])

@@ -1,6 +1,7 @@
 """
 ``benchmarks/compare.py``'s own logic: the race measure (median time to a threshold, a missing seed counting as its
-budget), the reading of ``--override`` values, and a run trained on from a saved model (``--continue-from``).
+budget), the reading of ``--override`` values, a run trained on from a saved model (``--continue-from``), and the
+flags the benchmark scripts refuse rather than ignore.
 """
 
 from __future__ import annotations
@@ -105,3 +106,50 @@ def test_a_run_continues_from_its_last_model(tmp_path: Any) -> None:
         main([*common, "--steps", "2000", "--out", str(tmp_path / "first"), "--continue-from", str(checkpoint)])
     with pytest.raises(SystemExit, match="one algorithm, env and seed"):
         main([*common[:5], "0", "1", *common[6:], "--steps", "10", "--continue-from", str(checkpoint)])
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        (["--steps", "0"], r"--steps 0: it must be positive"),
+        (["--steps", "100", "--seconds", "-1", "--eval-freq", "-5"], r"--seconds -1.0: .*--eval-freq -5: it must be 0"),
+        (["--steps", "100", "--eval-episodes", "0"], r"--eval-episodes 0: it must be positive"),
+        (["--steps", "100", "--seeds", "0", "0"], r"--seeds repeats \[0\]"),
+        (["--steps", "100", "--threshold", "CartPol-v1=400"], r"--threshold for \['CartPol-v1'\], which --envs"),
+        (["--steps", "100", "--stop-at-threshold"], r"--stop-at-threshold stops at a --threshold"),
+        (["--steps", "100", "--override", "ppo:n_steps=64"], r"--override for \['ppo'\], which --algos"),
+        (["--steps", "100", "--override", "ars_es:n_timesteps=100"], r"n_timesteps with --steps"),
+        (["--steps", "100", "--algos", "ars_es", "ppo_typo"], r"--algos \['ppo_typo'\]: unknown"),
+        (
+            ["--steps", "100", "--continue-from", "r/logs/ars_es/Pendulum-v1_1_seed0/last_model.zip"],
+            r"was trained on Pendulum-v1, not on --envs \['CartPole-v1'\]",
+        ),
+    ],
+)
+def test_compare_refuses_what_it_would_ignore(extra: list[str], message: str, tmp_path: Any) -> None:
+    base = ["--algos", "ars_es", "--envs", "CartPole-v1", "--eval-freq", "0", "--out", str(tmp_path)]
+    with pytest.raises(SystemExit, match=message):
+        load_script("compare").main(base + extra)
+    assert not (tmp_path / "logs").exists()  # refused before any run
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        (["--envs", "CartPole-v1", "Pendulm-v1"], r"No entry for \['Pendulm-v1'\]"),
+        (["--envs", "CartPole-v1", "--max-steps", "0"], r"--max-steps 0: it must be positive"),
+        (["--envs", "CartPole-v1", "--threshold", "Pendulm-v1=-100"], r"--threshold for \['Pendulm-v1'\]"),
+        (["--envs", "CartPole-v1", "--seeds", "0", "0"], r"--seeds repeats \[0\]"),
+        (["--envs", "CartPole-v1", "--algos", "ars_ess"], r"--algos \['ars_ess'\]: not sb3-es algorithms"),
+    ],
+)
+def test_verify_configs_refuses_what_it_would_ignore(extra: list[str], message: str, tmp_path: Any) -> None:
+    with pytest.raises(SystemExit, match=message):
+        load_script("verify_configs").main(["--table-only", "--out", str(tmp_path), *extra])
+
+
+@pytest.mark.parametrize("flag", ["--steps", "--episodes", "--fps", "--every"])
+def test_render_refuses_counts_below_one(flag: str, capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit):
+        load_script("render").main(["model.zip", flag, "0"])
+    assert f"{flag} 0: it must be at least 1" in capsys.readouterr().err

@@ -62,7 +62,7 @@ def _option_value(args: Sequence[str], names: Sequence[str], default: str) -> st
     value = default
     for i, arg in enumerate(args):
         flag, sep, inline = arg.partition("=")
-        if flag in names:
+        if _spells(flag, names):
             if sep:
                 value = inline
             elif i + 1 < len(args):
@@ -81,9 +81,17 @@ def _has_option(args: Sequence[str], short: str, long: str) -> bool:
     """
     for arg in args:
         flag = arg.split("=", 1)[0]
-        if flag == short or (flag.startswith("--") and len(flag) > 3 and long.startswith(flag)):
+        attached = len(short) == 2 and arg.startswith(short) and not arg.startswith("--")  # -f/path
+        if attached or _spells(flag, (short, long)):
             return True
     return False
+
+
+def _spells(flag: str, names: Sequence[str]) -> bool:
+    """:return: Whether ``flag`` is one of ``names``, or an abbreviation of a long one as argparse reads it."""
+    return flag in names or (
+        flag.startswith("--") and len(flag) > 3 and any(n.startswith("--") and n.startswith(flag) for n in names)
+    )
 
 
 def prepare_args(command: str, args: Sequence[str]) -> list[str]:
