@@ -57,6 +57,24 @@ def read_value(text: str) -> Any:
     return value
 
 
+def selection_problems(seeds: list[int], envs: list[str], thresholds: dict[str, float]) -> list[str]:
+    """
+    :param seeds: ``--seeds``.
+    :param envs: ``--envs``.
+    :param thresholds: ``--threshold`` values per env id.
+    :return: What a script would otherwise silently get wrong: repeated seeds (one run folder each), thresholds for
+        envs it does not run.
+    """
+    problems = []
+    repeated = sorted({seed for seed in seeds if seeds.count(seed) > 1})
+    if repeated:
+        problems.append(f"--seeds repeats {repeated}: each seed is one run (and one run folder)")
+    stray = sorted(set(thresholds) - set(envs))
+    if stray:
+        problems.append(f"--threshold for {stray}, which --envs {envs} does not run")
+    return problems
+
+
 def cpu_model() -> str:
     """:return: The CPU's model name (from ``/proc/cpuinfo`` on Linux), else what ``platform`` knows."""
     with contextlib.suppress(OSError):

@@ -72,7 +72,7 @@ import gymnasium as gym
 import numpy as np
 import torch
 import yaml
-from common import hardware, read_value, source_commit, versions
+from common import hardware, read_value, selection_problems, source_commit, versions
 from stable_baselines3.common.callbacks import EvalCallback
 from stable_baselines3.common.evaluation import evaluate_policy
 from stable_baselines3.common.utils import set_random_seed
@@ -858,12 +858,7 @@ def check_run_arguments(args: argparse.Namespace, thresholds: dict[str, float], 
     ):
         if value is not None and value < low:
             problems.append(f"{flag} {value}: it must be {'positive' if low > 0 else '0 or more'}")
-    repeated = sorted({seed for seed in args.seeds if args.seeds.count(seed) > 1})
-    if repeated:
-        problems.append(f"--seeds repeats {repeated}: each seed is one run (and one run folder)")
-    unknown_envs = sorted(set(thresholds) - set(args.envs))
-    if unknown_envs:
-        problems.append(f"--threshold for {unknown_envs}, which --envs {args.envs} does not run")
+    problems += selection_problems(args.seeds, args.envs, thresholds)
     unknown_algos = sorted(set(overrides) - set(args.algos))
     if unknown_algos:
         problems.append(f"--override for {unknown_algos}, which --algos {args.algos} does not run")

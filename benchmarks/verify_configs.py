@@ -34,7 +34,7 @@ import gymnasium as gym
 import numpy as np
 import shimmy
 import yaml
-from common import PAPER_THRESHOLDS
+from common import PAPER_THRESHOLDS, selection_problems
 
 import sb3_es
 from sb3_es.zoo import default_conf_file, sb3_es_algos
@@ -318,12 +318,7 @@ def main(argv: list[str] | None = None) -> str:
     unknown_algos = sorted(set(args.algos) - set(sb3_es_algos()))
     if unknown_algos:
         problems.append(f"--algos {unknown_algos}: not sb3-es algorithms (known: {sorted(sb3_es_algos())})")
-    repeated = sorted({seed for seed in args.seeds if args.seeds.count(seed) > 1})
-    if repeated:
-        problems.append(f"--seeds repeats {repeated}")
-    unknown_envs = sorted(set(given) - set(args.envs))
-    if unknown_envs:
-        problems.append(f"--threshold for {unknown_envs}, which --envs does not select")
+    problems += selection_problems(args.seeds, args.envs, given)
     if problems:
         raise SystemExit("verify_configs.py: " + "; ".join(problems) + ".")
     selected = entries(args.algos, args.envs)
