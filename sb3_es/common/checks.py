@@ -40,18 +40,15 @@ def check_scheduled_value(name: str, value: float, progress_remaining: float, al
         )
 
 
-def check_non_negative(name: str, value: float, integer: bool = False) -> None:
+def check_non_negative(name: str, value: float) -> None:
     """
-    Raise a clear error for a negative, non-finite (or, with ``integer``, fractional) hyperparameter.
+    Raise a clear error for a negative or non-finite hyperparameter (a count: ``strategies.base.check_count``).
 
     :param name: Hyperparameter name, for the message.
     :param value: Its value.
-    :param integer: Whether it must be an integer.
     """
-    valid = isinstance(value, numbers.Real) and np.isfinite(value) and value >= 0
-    if not valid or (integer and int(value) != value):
-        kind = "a non-negative integer" if integer else "a finite number >= 0"
-        raise ValueError(f"{name}={value!r}: it must be {kind}.")
+    if not (isinstance(value, numbers.Real) and np.isfinite(value) and value >= 0):
+        raise ValueError(f"{name}={value!r}: it must be a finite number >= 0.")
 
 
 def check_seed(seed: int | None) -> None:
