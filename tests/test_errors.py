@@ -41,14 +41,15 @@ def each(cls: type, name: str, values: list[Any], match: str | None = None, **kw
 NAN, INF = float("nan"), float("inf")
 #: ``(algorithm, constructor arguments, what the error message must match)``: every algorithm's bad values.
 BAD_HYPERPARAMETERS = [
-    *each(ARS, "n_delta", [0, -1, 2.5]),
+    *each(ARS, "n_delta", [0, -1, 2.5, NAN, INF, "8"], r"n_delta=(0|-1|2.5|nan|inf|'8'): it must be"),
     *[
         pytest.param(ARS, dict(n_delta=n_delta, n_top=n_top), "n_top", id=f"ARS-n_top-{i}")
-        for i, (n_delta, n_top) in enumerate([(2, 3), (4, 5), (4, 0), (4, -1), (4, 1.5)])
+        for i, (n_delta, n_top) in enumerate([(2, 3), (4, 5), (4, 0), (4, -1), (4, 1.5), (4, NAN)])
     ],
     *each(ARS, "delta_std", [0.0, -0.05, NAN, INF, lambda progress: -progress]),
     *each(ARS, "learning_rate", [0.0, -0.02, NAN, INF, lambda progress: 0.0]),
-    *each(ARS, "n_eval_episodes", [0, -2, 1.5]),
+    *each(ARS, "n_eval_episodes", [0, -2, 1.5, NAN, "2"]),
+    *each(ARS, "max_episode_steps", [0, 2.5, NAN, "100"], r"max_episode_steps=(0|2.5|nan|'100'): it must be"),
     *each(OpenES, "population_size", [1, 0, -2], antithetic=True),
     *each(OpenES, "population_size", [1, 0, -2, 4.5], antithetic=False),
     *each(OpenES, "sigma", [0.0, -0.1, NAN, lambda progress: 0.0]),
@@ -90,11 +91,11 @@ BAD_HYPERPARAMETERS = [
     *each(SimpleES, "population_size", [1, 4.5]),
     *each(SimpleES, "sigma", [0.0]),
     *each(SimpleES, "weights", ["fitness"]),
-    *each(REINFORCE, "n_episodes", [0, -3], r"n_episodes=(0|-3)"),
+    *each(REINFORCE, "n_episodes", [0, -3, 1.5, NAN], r"n_episodes=(0|-3|1.5|nan): it must be"),
     *each(REINFORCE, "learning_rate", [0.0, -1e-3, lambda _: -1.0], r"learning_rate=(0.0|-0.001|-1.0)"),
     *each(REINFORCE, "gamma", [1.5, -0.1], r"gamma=(1.5|-0.1).*\[0, 1\]"),
     *each(REINFORCE, "max_grad_norm", [0.0], "max_grad_norm=0.0"),
-    *each(REINFORCE, "policy_kwargs", [dict(n_bins=1)], "n_bins=1"),
+    *each(REINFORCE, "policy_kwargs", [dict(n_bins=1), dict(n_bins=2.5), dict(n_bins=NAN)], r"n_bins=(1|2.5|nan): it must be"),
     *each(REINFORCE, "policy_kwargs", [dict(use_baseline=True)], "use_baseline"),
     *each(
         REINFORCE,

@@ -285,8 +285,13 @@ def test_subproc_vec_env_user_is_told_the_faster_option() -> None:
 def test_bad_arguments() -> None:
     with pytest.raises(ValueError, match="env instance"):
         ProcessEvaluator(ToyEnv())  # type: ignore[arg-type]
-    with pytest.raises(ValueError, match="num_workers=0"):
-        ProcessEvaluator("Pendulum-v1", num_workers=0)
+    for bad in (0, 1.5, float("nan"), "2"):
+        with pytest.raises(ValueError, match=rf"num_workers={bad!r}: it must be"):
+            ProcessEvaluator("Pendulum-v1", num_workers=bad)  # type: ignore[arg-type]
+        with pytest.raises(ValueError, match=rf"envs_per_worker={bad!r}: it must be"):
+            ProcessEvaluator("Pendulum-v1", envs_per_worker=bad)  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match=r"max_worker_restarts=-1: it must be at least 0"):
+        ProcessEvaluator("Pendulum-v1", max_worker_restarts=-1)
     with pytest.raises(ValueError, match="start_method='thread'"):
         ProcessEvaluator("Pendulum-v1", start_method="thread")
     with pytest.raises(TypeError, match="env_kwarg: the env arguments of a worker are wrapper_class, env_kwargs"):

@@ -20,6 +20,7 @@ from sb3_es.common.population_algorithm import (
 )
 from sb3_es.evaluation import PopulationEvaluator
 from sb3_es.strategies import ARSStrategy
+from sb3_es.strategies.base import check_count
 
 SelfARS = TypeVar("SelfARS", bound="ARS")
 
@@ -71,10 +72,9 @@ class ARS(PopulationAlgorithm):
         max_episode_steps: int | None = None,
         _init_setup_model: bool = True,
     ) -> None:
-        if int(n_delta) != n_delta or n_delta < 1:
-            raise ValueError(f"n_delta={n_delta}: it must be a positive integer (number of random directions).")
-        n_top = n_delta if n_top is None else n_top
-        if int(n_top) != n_top or not 1 <= n_top <= n_delta:
+        n_delta = check_count("n_delta", n_delta)
+        n_top = n_delta if n_top is None else check_count("n_top", n_top)
+        if n_top > n_delta:
             raise ValueError(f"n_top={n_top} must be an integer between 1 and n_delta={n_delta}.")
         delta_std = constant_value(delta_std)
         check_positive("delta_std", delta_std)

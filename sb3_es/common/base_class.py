@@ -22,6 +22,7 @@ from stable_baselines3.common.utils import ConstantSchedule
 from sb3_es.common.checks import check_seed
 from sb3_es.common.save_util import check_save_file
 from sb3_es.evaluation.time_limit import env_time_limit
+from sb3_es.strategies.base import check_count
 
 #: Episode length cap for an env without a time limit, when ``max_episode_steps`` is not given (the length of
 #: MuJoCo's and dm_control's episodes).
@@ -277,8 +278,8 @@ class ESBaseAlgorithm(BaseAlgorithm):
         :param values: ``name -> value``, any subset of the hyperparameters.
         """
         steps = values.get("max_episode_steps")
-        if steps is not None and (int(steps) != steps or steps < 1):
-            raise ValueError(f"max_episode_steps={steps}: it must be a positive integer or None.")
+        if steps is not None:
+            check_count("max_episode_steps", steps)
 
     @classmethod
     def _parameters(cls) -> set[str]:

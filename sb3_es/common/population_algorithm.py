@@ -22,6 +22,7 @@ from sb3_es.common.remote_monitor import align_clock, write_remote_episodes
 from sb3_es.common.step_calls import StepCalls
 from sb3_es.common.strategy_algorithm import StrategyAlgorithm, check_noise_table_size, initial_value, make_noise_table
 from sb3_es.evaluation import PopulationEvaluator, PopulationResult, RewardShaping
+from sb3_es.strategies.base import check_count
 
 SelfPopulationAlgorithm = TypeVar("SelfPopulationAlgorithm", bound="PopulationAlgorithm")
 
@@ -144,9 +145,7 @@ class PopulationAlgorithm(StrategyAlgorithm):
 
     @classmethod
     def _check_live_values(cls, values: dict[str, Any]) -> None:
-        episodes = values.get("n_eval_episodes", 1)
-        if int(episodes) != episodes or episodes < 1:
-            raise ValueError(f"n_eval_episodes={episodes}: it must be a positive integer.")
+        check_count("n_eval_episodes", values.get("n_eval_episodes", 1))
         super()._check_live_values(values)
 
     @property

@@ -24,6 +24,7 @@ from stable_baselines3.common.vec_env import VecEnv
 from sb3_es.evaluation.base import Generation, PopulationEvaluator, PopulationResult, StepHook
 from sb3_es.evaluation.pool import WorkerDied, WorkerPool
 from sb3_es.evaluation.replay import replay
+from sb3_es.strategies.base import check_count
 from sb3_es.strategies.noise import NoiseTablePopulation
 
 logger = logging.getLogger(__name__)
@@ -91,12 +92,11 @@ class ShardedEvaluator(PopulationEvaluator, ABC):
         generation_timeout: float | None = None,
         linger: bool = True,
     ) -> None:
-        if num_workers is not None and (int(num_workers) != num_workers or num_workers < 1):
-            raise ValueError(f"num_workers={num_workers}: it must be a positive integer.")
+        if num_workers is not None:
+            num_workers = check_count("num_workers", num_workers)
         if not start_timeout > 0:
             raise ValueError(f"start_timeout={start_timeout}: give a positive number of seconds.")
-        if int(max_restarts) != max_restarts or max_restarts < 0:
-            raise ValueError(f"{self.restarts_argument}={max_restarts}: it must be an integer >= 0.")
+        max_restarts = check_count(self.restarts_argument, max_restarts, minimum=0)
         if generation_timeout is not None and not generation_timeout > 0:
             raise ValueError(f"generation_timeout={generation_timeout}: give a positive number of seconds, or None.")
         self._env_config = config

@@ -23,6 +23,7 @@ from typing_extensions import Unpack
 from sb3_es.evaluation.base import Generation
 from sb3_es.evaluation.network import NetworkSpec
 from sb3_es.evaluation.vec_env import VecEnvEvaluator
+from sb3_es.strategies.base import check_count
 from sb3_es.strategies.noise import noise_rows
 
 #: Env slots of each worker's VecEnv unless ``envs_per_worker`` says otherwise (worker processes and Ray actors).
@@ -86,8 +87,7 @@ def env_config(
             f"env={env!r}: pass an env id or a picklable env factory (a function returning a gym.Env), not an env "
             "instance: every worker builds its own envs."
         )
-    if int(envs_per_worker) != envs_per_worker or envs_per_worker < 1:
-        raise ValueError(f"envs_per_worker={envs_per_worker}: it must be a positive integer.")
+    envs_per_worker = check_count("envs_per_worker", envs_per_worker)
     unknown = sorted(set(env_args) - set(WorkerEnvArgs.__annotations__))
     if unknown:
         raise TypeError(

@@ -127,8 +127,7 @@ class DiscretizedPolicy(ActorCriticPolicy):
         optimizer_kwargs: dict[str, Any] | None = None,
     ) -> None:
         check_action_space(action_space)
-        if int(n_bins) != n_bins or n_bins < 2:
-            raise ValueError(f"n_bins={n_bins}: it must be an integer >= 2 (levels per action dimension).")
+        check_count("n_bins", n_bins, minimum=2)
         pi_arch, vf_arch = split_net_arch(net_arch)
         if vf_arch is not None and value_net_arch is not None:
             raise ValueError(

@@ -26,6 +26,7 @@ from sb3_es.evaluation.time_limit import end_capped_episodes
 from sb3_es.reinforce.episodes import EpisodeBatch, EpisodeCollector, check_rewards
 from sb3_es.reinforce.legacy import upgrade_legacy_optimizer_state
 from sb3_es.reinforce.policies import DiscretizedPolicy, MlpPolicy, MultiInputPolicy, check_action_space
+from sb3_es.strategies.base import check_count
 
 SelfREINFORCE = TypeVar("SelfREINFORCE", bound="REINFORCE")
 
@@ -102,9 +103,7 @@ class REINFORCE(ESBaseAlgorithm):
 
     @classmethod
     def _check_live_values(cls, values: dict[str, Any]) -> None:
-        n_episodes = values.get("n_episodes", 1)
-        if int(n_episodes) != n_episodes or n_episodes < 1:
-            raise ValueError(f"n_episodes={n_episodes}: it must be a positive integer (episodes per update).")
+        check_count("n_episodes", values.get("n_episodes", 1))
         if not 0.0 <= values.get("gamma", 0.0) <= 1.0:
             raise ValueError(f"gamma={values['gamma']}: the discount factor must be in [0, 1].")
         max_grad_norm = values.get("max_grad_norm")
