@@ -5,8 +5,8 @@ Run::
     python examples/ars_bipedal_walker.py --timesteps 5000000 --n-envs 2
 
 Linear policy, observation normalization inside the policy, and each step's reward clipped to [-1, 1] in
-the fitness only (the -100 fall penalty becomes -1; see docs/guide/shaping.md): the configuration of
-``sb3_es/hyperparams/ars.yml`` measured in docs/benchmarks.md. Each env slot evaluates a different
+the fitness only (the -100 fall penalty becomes -1; see docs/guide/shaping.md): the BipedalWalker-v3 entry of
+``sb3_es/hyperparams/ars_es.yml``, measured in docs/benchmarks.md. Each env slot evaluates a different
 candidate; ``--subproc`` puts each env in its own process.
 """
 

@@ -32,6 +32,7 @@ def main() -> None:
     parser.add_argument("--n-envs", type=int, default=4)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--tensorboard-log", default="runs")
+    parser.add_argument("--save-path", default=None, help="default: runs/ars_walker_walk_<policy>.zip")
     args = parser.parse_args()
 
     gym.make(ENV_ID).close()  # fail early with gymnasium's message if dm_control is missing
@@ -52,10 +53,11 @@ def main() -> None:
         verbose=1,
     )
     model.learn(args.timesteps, progress_bar=True)
-    path = f"runs/ars_walker_walk_{args.policy}.zip"
+    path = args.save_path or f"runs/ars_walker_walk_{args.policy}.zip"
     model.save(path)
     mean, std = evaluate_policy(model, make_vec_env(ENV_ID, seed=args.seed + 1), n_eval_episodes=5)
-    print(f"mean return over 5 episodes: {mean:.1f} +/- {std:.1f}; model saved to {path}")
+    print(f"mean return over 5 episodes: {mean:.1f} +/- {std:.1f}")
+    print(f"model saved to {path}; TensorBoard logs in {model.logger.get_dir()}")
 
 
 if __name__ == "__main__":

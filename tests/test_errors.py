@@ -95,7 +95,12 @@ BAD_HYPERPARAMETERS = [
     *each(REINFORCE, "learning_rate", [0.0, -1e-3, lambda _: -1.0], r"learning_rate=(0.0|-0.001|-1.0)"),
     *each(REINFORCE, "gamma", [1.5, -0.1], r"gamma=(1.5|-0.1).*\[0, 1\]"),
     *each(REINFORCE, "max_grad_norm", [0.0], "max_grad_norm=0.0"),
-    *each(REINFORCE, "policy_kwargs", [dict(n_bins=1), dict(n_bins=2.5), dict(n_bins=NAN)], r"n_bins=(1|2.5|nan): it must be"),
+    *each(
+        REINFORCE,
+        "policy_kwargs",
+        [dict(n_bins=1), dict(n_bins=2.5), dict(n_bins=NAN)],
+        r"n_bins=(1|2.5|nan): it must be",
+    ),
     *each(REINFORCE, "policy_kwargs", [dict(use_baseline=True)], "use_baseline"),
     *each(
         REINFORCE,
