@@ -507,11 +507,12 @@ def test_continuing_applies_new_values(runs: Path, tmp_path: Path) -> None:
 @pytest.mark.parametrize("key", KEYS)
 def test_optimize_two_trials(key: str, tmp_path: Path) -> None:
     # CartPole-v1 for the population methods (short episodes whatever the sampled population), Pendulum-v1 for
-    # REINFORCE (Box actions: n_bins is sampled)
-    env_id = "Pendulum-v1" if key == "reinforce" else "CartPole-v1"
+    # REINFORCE (Box actions: n_bins is sampled). The budget, evaluated every half of it, is at most a generation or
+    # two of the largest sampled population, so that it is evaluated a few times, not every few hundred steps.
+    env_id, steps = ("Pendulum-v1", "400") if key == "reinforce" else ("CartPole-v1", "2000")
     extra = ["-params", "n_episodes:2"] if key == "reinforce" else []
     zoo(
-        *("train", "--algo", key, "--env", env_id, "-optimize", "--n-trials", "2", "-n", "400"),
+        *("train", "--algo", key, "--env", env_id, "-optimize", "--n-trials", "2", "-n", steps),
         *("--n-evaluations", "2", "--eval-episodes", "1", "--no-optim-plots", "-f", str(tmp_path), "--seed", "0"),
         *("--n-startup-trials", "1", "--verbose", "0", "--num-threads", "1", *extra),
     )
