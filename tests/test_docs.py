@@ -2,12 +2,50 @@
 need to know that differs from SB3."""
 
 import re
+import subprocess
+import sys
+import textwrap
 from pathlib import Path
 
 import pytest
 from algorithms import ALGORITHMS, Algo, learn_logged, pendulum_env
 
 DOCS_DIR = Path(__file__).resolve().parent.parent / "docs"
+#: The pages a user copies code from.
+PAGES = [DOCS_DIR.parent / "README.md", *sorted(path for path in DOCS_DIR.rglob("*.md") if "_build" not in path.parts)]
+
+
+def python_snippets() -> list[tuple[str, str]]:
+    """:return: ``(where, code)`` of every ```` ```python ```` block of the pages, list items' indented ones too."""
+    found = []
+    for page in PAGES:
+        text = page.read_text()
+        for match in re.finditer(r"^([ \t]*)```python\n(.*?)^\1```", text, re.S | re.M):
+            line = text.count("\n", 0, match.start()) + 1
+            found.append((f"{page.relative_to(DOCS_DIR.parent)}:{line}", textwrap.dedent(match[2])))
+    return found
+
+
+def test_python_snippets_run_as_copied(tmp_path: Path) -> None:
+    # Each block is copied on its own: it imports what it uses (ruff's undefined-name rules), and one that makes a
+    # dm_control env imports shimmy, which registers them.
+    snippets = python_snippets()
+    assert len(snippets) > 15
+    for index, (where, code) in enumerate(snippets):
+        (tmp_path / f"snippet_{index}.py").write_text(f"# {where}\n{code}")
+        if "dm_control/" in code:
+            assert re.search(r"^import shimmy", code, re.M), f"{where}: makes a dm_control env without importing shimmy"
+    ruff = [sys.executable, "-m", "ruff", "check", "--isolated", "--no-cache", "--select", "F821,F822,F823"]
+    checked = subprocess.run([*ruff, "--output-format", "concise", str(tmp_path)], capture_output=True, text=True)
+    # snippet_<i>.py line n (after the comment line) is the page's line fence + n - 1
+    located = {f"snippet_{index}.py": where.rsplit(":", 1) for index, (where, _) in enumerate(snippets)}
+
+    def page_line(match: re.Match[str]) -> str:
+        page, fence = located[match[1]]
+        return f"{page}:{int(fence) + int(match[2]) - 1}"
+
+    report = re.sub(r"\S*(snippet_\d+\.py):(\d+)", page_line, checked.stdout)
+    assert checked.returncode == 0, report + checked.stderr
 
 
 def test_docs_build(tmp_path: Path) -> None:
