@@ -12,8 +12,8 @@ import torch as th
 @pytest.fixture(scope="session")
 def ray_cluster() -> Iterator[Any]:
     """A local Ray instance with 2 CPUs for the whole session (started once: it takes seconds)."""
-    ray = pytest.importorskip("ray")
     import envs
+    import ray
     import sharded_helpers
 
     # The test helpers live in modules that Ray workers cannot import: ship them by value.

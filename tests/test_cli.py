@@ -29,7 +29,6 @@ def test_quickstart_former_option_names(tmp_path: Path) -> None:
 
 
 def test_commands_forward_to_the_zoo(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    pytest.importorskip("rl_zoo3")
     monkeypatch.chdir(tmp_path)
     main(
         [
@@ -56,10 +55,11 @@ def test_former_train_flags_say_what_to_use(args: list[str], hint: str) -> None:
         main(["train", "--algo", "reinforce", "--env", "CartPole-v1", *args])
 
 
-def test_unknown_algorithm() -> None:
-    pytest.importorskip("rl_zoo3")
-    with pytest.raises(SystemExit):  # rl-zoo's own argparse error: invalid choice 'nope'
+def test_unknown_algorithm(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as stop:  # rl-zoo's own argparse error
         main(["train", "--algo", "nope", "--env", "CartPole-v1"])
+    assert stop.value.code == 2
+    assert "argument --algo: invalid choice: 'nope'" in capsys.readouterr().err
 
 
 def test_quickstart_refuses_a_budget_below_one(capsys: pytest.CaptureFixture[str]) -> None:
@@ -69,7 +69,6 @@ def test_quickstart_refuses_a_budget_below_one(capsys: pytest.CaptureFixture[str
 
 
 def test_abbreviated_and_attached_options_are_read_as_rl_zoo_reads_them() -> None:
-    pytest.importorskip("rl_zoo3")
     from sb3_es.zoo.commands import prepare_args
 
     args = prepare_args("train", ["--alg", "ars_es", "--env", "CartPole-v1"])

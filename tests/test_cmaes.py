@@ -96,11 +96,17 @@ def test_loaded_strategy_asks_what_the_saved_one_would(tmp_path: Path) -> None:
     np.testing.assert_array_equal(CMAES.load(tmp_path / "b.zip").strategy.ask(), expected)
 
 
-def test_resume_restores_the_pycma_state(tmp_path: Path) -> None:
-    """The generic check (``test_save_load.py``), then pycma's own state: mean, step size, covariance, iterations."""
+@pytest.mark.parametrize("diagonal", [False, True])
+def test_resume_restores_the_pycma_state(diagonal: bool, tmp_path: Path) -> None:
+    """The generic check (``test_save_load.py``), then pycma's own state: mean, step size, covariance, iterations;
+    for the full covariance and for separable CMA-ES (what ``diagonal="auto"`` picks for large policies)."""
     straight, resumed = check_resume(
-        lambda env: CMAES("LinearPolicy", env, seed=3), pendulum_env, PENDULUM_GENERATION, tmp_path / "half.zip"
+        lambda env: CMAES("LinearPolicy", env, diagonal=diagonal, seed=3),
+        pendulum_env,
+        PENDULUM_GENERATION,
+        tmp_path / "half.zip",
     )
+    assert straight.strategy.diagonal is resumed.strategy.diagonal is diagonal
     assert_same_cma_state(straight, resumed)
 
 

@@ -49,8 +49,6 @@ def test_python_snippets_run_as_copied(tmp_path: Path) -> None:
 
 
 def test_docs_build(tmp_path: Path) -> None:
-    pytest.importorskip("sphinx")
-    pytest.importorskip("myst_parser")
     from sphinx.cmd.build import build_main
 
     out_dir = tmp_path / "html"

@@ -31,7 +31,7 @@ def each(cls: type, name: str, values: list[Any], match: str | None = None, **kw
         pytest.param(
             cls,
             {**kwargs, name: value},
-            match or name,
+            match or rf"\b{name}=",
             id="-".join([cls.__name__, *(f"{k}={v}" for k, v in kwargs.items()), name, str(i)]),
         )
         for i, value in enumerate(values)
@@ -49,7 +49,11 @@ BAD_HYPERPARAMETERS = [
     *each(ARS, "delta_std", [0.0, -0.05, NAN, INF, lambda progress: -progress]),
     *each(ARS, "learning_rate", [0.0, -0.02, NAN, INF, lambda progress: 0.0]),
     *each(ARS, "n_eval_episodes", [0, -2, 1.5, NAN, "2"]),
-    *each(ARS, "max_episode_steps", [0, 2.5, NAN, "100"], r"max_episode_steps=(0|2.5|nan|'100'): it must be"),
+    *[
+        param
+        for cls in (ARS, OpenES, CMAES, PGPE, SimpleES, REINFORCE)
+        for param in each(cls, "max_episode_steps", [0, -5, 2.5, NAN, "100"], r"max_episode_steps=\S+: it must be")
+    ],
     *each(OpenES, "population_size", [1, 0, -2], antithetic=True),
     *each(OpenES, "population_size", [1, 0, -2, 4.5], antithetic=False),
     *each(OpenES, "sigma", [0.0, -0.1, NAN, lambda progress: 0.0]),

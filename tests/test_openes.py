@@ -327,7 +327,14 @@ def test_odd_population_with_antithetic(population_size: int) -> None:
 
 
 def test_decay_of_one_is_accepted() -> None:
-    OpenES("LinearPolicy", "Pendulum-v1", sigma_decay=1.0, learning_rate_decay=1.0)
+    # a decay of 1 keeps the value: the limits below it never act
+    model = OpenES(
+        "LinearPolicy", "Pendulum-v1", population_size=4, sigma=0.3, learning_rate=0.05, sigma_decay=1.0,
+        learning_rate_decay=1.0, sigma_limit=0.01, learning_rate_limit=0.001, seed=0,
+    )  # fmt: skip
+    model.learn(2 * 4 * 200)
+    assert model._n_updates == 2
+    assert (model.strategy.sigma, model.strategy.learning_rate) == (0.3, 0.05)
 
 
 # ---------------------------------------------------------------------------- ClipUp

@@ -212,7 +212,7 @@ def test_max_stdev_errors(kwargs: dict[str, Any], message: str) -> None:
 def test_load_refuses_max_speed_without_clipup(tmp_path: Path) -> None:
     model = pendulum_model(optimizer="adam", center_learning_rate=0.01)
     model.save(tmp_path / "model.zip")
-    with pytest.raises(ValueError, match=r"optimizer='adam': .* and no max_speed"):
+    with pytest.raises(ValueError, match=r"optimizer='adam' with .*max_speed=0.1: .* and no max_speed"):
         PGPE.load(tmp_path / "model.zip", max_speed=0.1)
 
 

@@ -16,16 +16,14 @@ from typing import Any
 
 import numpy as np
 import pytest
+import ray
+from envs import StepCounter, ToyEnv
+from sharded_helpers import ENVS_PER_WORKER, learn_generations, make_ars, toy_policy, toy_population
+from stable_baselines3.common.env_util import make_vec_env
 
-ray = pytest.importorskip("ray")
-
-from envs import StepCounter, ToyEnv  # noqa: E402
-from sharded_helpers import ENVS_PER_WORKER, learn_generations, make_ars, toy_policy, toy_population  # noqa: E402
-from stable_baselines3.common.env_util import make_vec_env  # noqa: E402
-
-from sb3_es import ARS  # noqa: E402
-from sb3_es.evaluation.ray import RayEvaluator  # noqa: E402
-from sb3_es.evaluation.worker import DEFAULT_ENVS_PER_WORKER  # noqa: E402
+from sb3_es import ARS
+from sb3_es.evaluation.ray import RayEvaluator
+from sb3_es.evaluation.worker import DEFAULT_ENVS_PER_WORKER
 
 pytestmark = pytest.mark.ray
 

@@ -24,7 +24,6 @@ from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.preprocessing import preprocess_obs
 from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
-from sb3_es import ARS
 from sb3_es.common.base_class import DEFAULT_MAX_EPISODE_STEPS
 from sb3_es.common.policies import MlpPolicy
 from sb3_es.evaluation import ObsStats
@@ -121,12 +120,6 @@ def test_vec_env_wrapper_without_time_limit_is_a_clear_error(algo: Algo) -> None
     with pytest.raises(RuntimeError, match="max_episode_steps=20") as info:
         model.learn(100)
     assert "TimeLimit" in str(info.value) and "VecNormalize" in str(info.value)
-
-
-@pytest.mark.parametrize("max_episode_steps", [0, -5, 2.5])
-def test_bad_max_episode_steps(max_episode_steps: Any) -> None:
-    with pytest.raises(ValueError, match="max_episode_steps"):
-        ARS("LinearPolicy", "Pendulum-v1", max_episode_steps=max_episode_steps)
 
 
 # ---------------------------------------------------------------------------- observation statistics
@@ -226,6 +219,7 @@ def test_dict_of_multi_binary_observations(algo: Algo) -> None:
     env = BitFlippingEnv(n_bits=4)
     model = make_model(algo, env)
     model.learn(50)
+    assert model._n_updates >= 1  # (CMA-ES may stop after one: pycma sees a flat fitness)
     obs, _ = env.reset(seed=0)
     action, _ = model.predict(obs)
     assert env.action_space.contains(int(action))

@@ -16,22 +16,19 @@ from types import ModuleType
 from typing import Any
 
 import numpy as np
+import optuna
 import pytest
+import rl_zoo3
+import rl_zoo3.hyperparams_opt
+import rl_zoo3.train
 import torch
 import yaml
+from rl_zoo3.exp_manager import ExperimentManager
+from stable_baselines3.common.callbacks import BaseCallback
 
-pytest.importorskip("rl_zoo3")
-
-import optuna  # noqa: E402
-import rl_zoo3  # noqa: E402
-import rl_zoo3.hyperparams_opt  # noqa: E402
-import rl_zoo3.train  # noqa: E402
-from rl_zoo3.exp_manager import ExperimentManager  # noqa: E402
-from stable_baselines3.common.callbacks import BaseCallback  # noqa: E402
-
-from sb3_es import ARS  # noqa: E402
-from sb3_es.common.population_algorithm import PopulationAlgorithm  # noqa: E402
-from sb3_es.zoo import (  # noqa: E402
+from sb3_es import ARS
+from sb3_es.common.population_algorithm import PopulationAlgorithm
+from sb3_es.zoo import (
     ALGOS,
     HYPERPARAMS_DIR,
     SCRIPTS,
@@ -41,8 +38,8 @@ from sb3_es.zoo import (  # noqa: E402
     prepare_args,
     register,
 )
-from sb3_es.zoo.hyperparams_opt import CONVERTERS, SAMPLERS  # noqa: E402
-from sb3_es.zoo.registry import zoo_meaning  # noqa: E402
+from sb3_es.zoo.hyperparams_opt import CONVERTERS, SAMPLERS
+from sb3_es.zoo.registry import zoo_meaning
 
 ROOT = Path(__file__).resolve().parent.parent
 KEYS = tuple(ALGOS)
@@ -413,7 +410,6 @@ def test_record_training(runs: Path, tmp_path: Path) -> None:
 
 
 def test_all_plots_and_plot_train(runs: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    pytest.importorskip("seaborn")
     pickle = tmp_path / "results"
     zoo("all_plots", "-a", *KEYS, "-e", "Pendulum-v1", "-f", str(runs / "logs"), "--no-display", "-o", str(pickle))
     table = capsys.readouterr().out
@@ -543,7 +539,6 @@ def test_pruning_on_evaluations(tmp_path: Path) -> None:
 
 # ----------------------------------------------------------------------------------------------- benchmarks
 def test_compare_writes_rl_zoos_layout(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    pytest.importorskip("matplotlib")
     compare = load_script("compare")
     out = tmp_path / "cmp"
     # generations of 1,600 env steps (ARS, the file's Pendulum-v1 entry: n_delta 4) and 800 (CMA-ES: its file's
@@ -568,7 +563,6 @@ def test_compare_writes_rl_zoos_layout(tmp_path: Path, capsys: pytest.CaptureFix
     assert "time to return ≥ -2000" in text and "--rliable --iqm" in text
     assert compare.main(["--out", str(out), "--report-only"]).is_file()  # redrawn from the files alone
     # rl-zoo's plots read the runs: learning curves, results table, rliable's IQM and bootstrap intervals
-    pytest.importorskip("rliable")
     capsys.readouterr()
     pickle = tmp_path / "all_plots"
     zoo(
@@ -669,8 +663,6 @@ def test_budget_overshoot_is_at_most_one_generation(key: str) -> None:
 
 
 def test_render_gif(runs: Path, tmp_path: Path) -> None:
-    pytest.importorskip("imageio")
-    pytest.importorskip("pygame")
     model = runs / "logs" / "ars_es" / "Pendulum-v1_1" / "Pendulum-v1.zip"
     out = tmp_path / "pendulum.gif"
     proc = run([str(ROOT / "benchmarks" / "render.py"), str(model), "--out", str(out), "--steps", "8"], tmp_path)

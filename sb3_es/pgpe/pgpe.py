@@ -29,8 +29,8 @@ def check_step_sizes(optimizer: str, max_speed: float | None, center_learning_ra
             check_positive(name, value)
     if optimizer != "clipup" and (center_learning_rate is None or max_speed is not None):
         raise ValueError(
-            f"optimizer={optimizer!r}: pass center_learning_rate (None means max_speed / 2, a ClipUp setting) "
-            "and no max_speed (ClipUp's speed limit)."
+            f"optimizer={optimizer!r} with center_learning_rate={center_learning_rate}, max_speed={max_speed}: pass "
+            "center_learning_rate (None means max_speed / 2, a ClipUp setting) and no max_speed (ClipUp's speed limit)."
         )
 
 
