@@ -264,6 +264,29 @@ def test_ars_file_covers_rl_zoos_ars_envs() -> None:
             assert source["policy_kwargs"].split("net_arch=")[1] in entry["policy_kwargs"]
 
 
+def entry_comments(path: Path) -> dict[str, str]:
+    """:return: ``entry -> the comment lines right above it`` for each top-level entry of a YAML file."""
+    lines = path.read_text().splitlines()
+    comments = {}
+    for index, line in enumerate(lines):
+        if re.fullmatch(r"[^\s#][^:]*:\s*", line):
+            start = index
+            while start > 0 and lines[start - 1].startswith("#"):
+                start -= 1
+            comments[line.rstrip(": ")] = "\n".join(lines[start:index])
+    return comments
+
+
+@pytest.mark.parametrize("algo", KEYS)
+def test_every_packaged_entry_states_what_was_measured(algo: str) -> None:
+    # the rule of the files' headers: the comment above each entry gives its measured result, date and command
+    comments = entry_comments(HYPERPARAMS_DIR / f"{algo}.yml")
+    assert set(comments) == set(yaml.safe_load((HYPERPARAMS_DIR / f"{algo}.yml").read_text()))
+    for entry, comment in comments.items():
+        assert re.search(r"\b20\d\d-\d\d-\d\d\b", comment), f"{algo}.yml {entry}: no date in {comment!r}"
+        assert re.search(r"python (benchmarks|-m)", comment), f"{algo}.yml {entry}: no command in {comment!r}"
+
+
 @pytest.mark.parametrize(
     "algo, env_id",
     [(algo, env_id) for algo in KEYS for env_id in QUICK_ENVS if env_id in shipped_envs(algo)]
