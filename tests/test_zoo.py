@@ -206,6 +206,19 @@ def test_tensorboard_run_name_is_not_sb3_contribs(tmp_path: Path) -> None:
 
 
 # ----------------------------------------------------------------------------------------------- packaged configs
+def entry_comments(path: Path) -> dict[str, str]:
+    """:return: ``entry -> the comment lines right above it`` for each top-level entry of a YAML file."""
+    lines = path.read_text().splitlines()
+    comments = {}
+    for index, line in enumerate(lines):
+        if re.fullmatch(r"[^\s#][^:]*:\s*", line):
+            start = index
+            while start > 0 and lines[start - 1].startswith("#"):
+                start -= 1
+            comments[line.rstrip(": ")] = " ".join(lines[start:index])
+    return comments
+
+
 @pytest.mark.parametrize("algo", KEYS)
 def test_hyperparameter_files_parse(algo: str, tmp_path: Path) -> None:
     path = HYPERPARAMS_DIR / f"{algo}.yml"
@@ -217,15 +230,11 @@ def test_hyperparameter_files_parse(algo: str, tmp_path: Path) -> None:
     # an entry that failed verification is removed, not shipped
     assert not set(REMOVED.get(algo, ())) & set(data), f"{path} ships a removed entry"
     assert "FAILED verification" not in text and "kept only because" not in text
-    lines = text.splitlines()
+    comments = entry_comments(path)
     for env_id in envs:
         # each entry is preceded by a comment saying where its values come from and what a run measured
-        index = lines.index(f"{env_id}:")
-        assert lines[index - 1].startswith("#"), f"{path}: no source comment above {env_id}"
-        start = index
-        while lines[start - 1].startswith("#"):
-            start -= 1
-        comment = " ".join(lines[start:index])
+        comment = comments[env_id]
+        assert comment, f"{path}: no source comment above {env_id}"
         assert "untested" not in comment, f"{path}: {env_id} is shipped unmeasured"
         entry = data[env_id]
         assert entry["policy"] in ("LinearPolicy", "MlpPolicy", "MultiInputPolicy")
@@ -242,16 +251,12 @@ def test_hyperparameter_files_parse(algo: str, tmp_path: Path) -> None:
 
 def test_ars_file_covers_rl_zoos_ars_envs() -> None:
     path = HYPERPARAMS_DIR / "ars_es.yml"
-    lines = path.read_text().splitlines()
+    comments = entry_comments(path)
     ours = yaml.safe_load(path.read_text())
     theirs = yaml.safe_load((Path(rl_zoo3.__file__).parent / "hyperparams" / "ars.yml").read_text())
     for env_id, zoo_id in ARS_ZOO_ENVS.items():
         # the comment block above the entry says whether a run checked it (docs/benchmarks.md, "Verified configs")
-        end = lines.index(f"{env_id}:")
-        start = end
-        while lines[start - 1].startswith("#"):
-            start -= 1
-        comment = " ".join(lines[start:end])
+        comment = comments[env_id]
         status = ("Verified 20", "Measured 20")
         assert any(word in comment for word in status), f"{env_id}: the comment must say one of {status}"
         if env_id in ARS_REPLACED:
@@ -267,19 +272,6 @@ def test_ars_file_covers_rl_zoos_ars_envs() -> None:
             assert "normalize_observations=False" in entry["policy_kwargs"]
         if "net_arch" in str(source.get("policy_kwargs")):
             assert source["policy_kwargs"].split("net_arch=")[1] in entry["policy_kwargs"]
-
-
-def entry_comments(path: Path) -> dict[str, str]:
-    """:return: ``entry -> the comment lines right above it`` for each top-level entry of a YAML file."""
-    lines = path.read_text().splitlines()
-    comments = {}
-    for index, line in enumerate(lines):
-        if re.fullmatch(r"[^\s#][^:]*:\s*", line):
-            start = index
-            while start > 0 and lines[start - 1].startswith("#"):
-                start -= 1
-            comments[line.rstrip(": ")] = "\n".join(lines[start:index])
-    return comments
 
 
 @pytest.mark.parametrize("algo", KEYS)

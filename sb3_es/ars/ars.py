@@ -79,8 +79,8 @@ class ARS(PopulationAlgorithm):
         delta_std = constant_value(delta_std)
         check_positive("delta_std", delta_std)
         super().__init__(**base_arguments(super().__init__, locals()))
-        self.n_delta = int(n_delta)
-        self.n_top = int(n_top)
+        self.n_delta = n_delta
+        self.n_top = n_top
         self.delta_std = delta_std
         self.noise_table_size = check_noise_table_size(noise_table_size)
         if _init_setup_model:

@@ -103,9 +103,9 @@ class ShardedEvaluator(PopulationEvaluator, ABC):
         #: The env id or factory the workers build their envs from.
         self.env = config["env"]
         self.envs_per_worker = int(config["n_envs"])
-        self._num_workers = None if num_workers is None else int(num_workers)
+        self._num_workers = num_workers
         self.start_timeout = float(start_timeout)
-        self.max_restarts = int(max_restarts)
+        self.max_restarts = max_restarts
         self.generation_timeout = generation_timeout
         self.linger = bool(linger)
         #: Number of workers replaced after they died, over the evaluator's life.

@@ -96,7 +96,7 @@ def env_config(
         )
     config: dict[str, Any] = dict(env_args)
     config["vec_env_cls"] = config.get("vec_env_cls") or DummyVecEnv
-    return dict(env=env, n_envs=int(envs_per_worker), **config)
+    return dict(env=env, n_envs=envs_per_worker, **config)
 
 
 class ShareRunner:
