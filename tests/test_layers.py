@@ -48,11 +48,14 @@ def test_the_check_sees_imports() -> None:
     assert "strategies" in sb3_es_imports(PACKAGE / "evaluation" / "sharded.py")
 
 
-def test_import_sb3_es_does_not_import_ray() -> None:
+def test_import_sb3_es_imports_neither_ray_nor_pycma() -> None:
+    # Ray is an extra; pycma imports SciPy and matplotlib (about 2 s), which every Ray actor and worker process
+    # would pay at start-up: both are imported where they are used.
+    heavy = ("ray", "cma", "scipy", "matplotlib")
     script = (
         "import sys\n"
-        "import sb3_es, sb3_es.evaluation\n"
-        "print(sorted(m for m in sys.modules if m == 'ray' or m.startswith(('ray.', 'sb3_es.evaluation.ray'))))\n"
+        "import sb3_es, sb3_es.evaluation, sb3_es.evaluation.worker, sb3_es.evaluation.process_worker\n"
+        f"print(sorted(m for m in sys.modules if m.split('.')[0] in {heavy!r} or m == 'sb3_es.evaluation.ray'))\n"
     )
     out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=600, check=True)
     assert out.stdout.strip() == "[]"

@@ -7,17 +7,31 @@ import math
 import os
 import warnings
 from collections.abc import Iterator
-from typing import Any, Literal
+from types import ModuleType
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
-with warnings.catch_warnings():  # pycma warns at import when matplotlib (only used for its plots) is absent
-    warnings.simplefilter("ignore")
-    import cma
-
 from sb3_es.strategies.base import Strategy, check_count
 
+if TYPE_CHECKING:
+    import cma
+
 Restarts = Literal["ipop", "bipop"] | None
+
+
+def _import_cma() -> ModuleType:
+    """
+    Import pycma on first use: it imports SciPy and matplotlib (about 2 s), which ``import sb3_es`` and the
+    evaluation workers, who never build a CMA-ES, should not pay for.
+
+    :return: The ``cma`` module.
+    """
+    with warnings.catch_warnings():  # pycma warns at import when matplotlib (only used for its plots) is absent
+        warnings.simplefilter("ignore")
+        import cma
+
+    return cma
 
 
 def _global_randn(*shape: int) -> np.ndarray:
@@ -120,8 +134,8 @@ class CMAESStrategy(Strategy):
             raise ValueError(
                 f"population_size={self.base_population_size} is too small for CMA-ES on {self.num_params} "
                 "parameters: pycma adapts the step size with two-point adaptation (TPA, its default from "
-                f"{cma.evolution_strategy.TPA_dimension} parameters), which spends 2 candidates of every generation "
-                "on the last mean shift, and it adds a mirrored candidate. Use population_size >= "
+                f"{_import_cma().evolution_strategy.TPA_dimension} parameters), which spends 2 candidates of every "
+                "generation on the last mean shift, and it adds a mirrored candidate. Use population_size >= "
                 f"{self.min_population_size}, or None for pycma's default ({self.default_population_size})."
             )
 
@@ -144,7 +158,7 @@ class CMAESStrategy(Strategy):
         options = {"popsize": popsize, "CMA_diagonal": self.diagonal, "verbose": -9, "randn": _global_randn}
         options.update(self.cma_options)
         with self._private_random():
-            return cma.CMAEvolutionStrategy(x0, sigma0, options)
+            return _import_cma().CMAEvolutionStrategy(x0, sigma0, options)
 
     @property
     def min_population_size(self) -> int:
