@@ -50,7 +50,8 @@ def quickstart(timesteps: int, log_folder: str, seed: int | None) -> tuple[ARS, 
     """
     env_id, n_eval_episodes = QUICKSTART["env"], 10
     env = make_vec_env(env_id, n_envs=QUICKSTART["n_envs"], seed=seed)
-    eval_env = make_vec_env(env_id, n_envs=1, seed=None if seed is None else seed + 10_000)
+    # One env per evaluation episode: the episodes run side by side, one batched prediction per step.
+    eval_env = make_vec_env(env_id, n_envs=n_eval_episodes, seed=None if seed is None else seed + 10_000)
     model = ARS(
         QUICKSTART["policy"], env, tensorboard_log=log_folder, seed=seed, verbose=1, **QUICKSTART["hyperparams"]
     )
