@@ -122,6 +122,15 @@ BAD_HYPERPARAMETERS = [
     *each(REINFORCE, "policy_kwargs", [dict(net_arch=dict(pi=[8], qf=[8]))], r"unknown entry \['qf'\]"),
     *each(REINFORCE, "policy_kwargs", [dict(joint=True, max_joint_actions=1000.7)], "max_joint_actions=1000.7"),
     *each(REINFORCE, "policy_kwargs", [dict(value_net_arch=[7])], r"value_net_arch=\[7\] gives .* use_baseline=True"),
+    *each(OpenES, "learning_rate_decay", [0.9], r"learning_rate_decay=0.9 would never apply", learning_rate=0.0005),
+    *each(OpenES, "sigma_decay", [0.99], r"sigma_decay=0.99 would never apply", sigma=0.005),
+    *[
+        param
+        for cls in (ARS, OpenES, CMAES, PGPE, SimpleES)
+        for param in each(
+            cls, "policy_kwargs", [dict(layer_norm=True), dict(activation_fn=th.nn.Tanh)], "LinearPolicy has no hidden"
+        )
+    ],
     *each(
         REINFORCE,
         "policy_kwargs",
@@ -130,6 +139,65 @@ BAD_HYPERPARAMETERS = [
         use_baseline=True,
     ),
 ]
+
+
+#: ``(algorithm, hyperparameter)``: number-valued hyperparameters, which a string must not reach as a number.
+NUMBERS = [
+    *[(ARS, name) for name in ("delta_std", "learning_rate")],
+    *[(OpenES, name) for name in ("sigma", "sigma_decay", "learning_rate", "momentum")],
+    (CMAES, "sigma"),
+    *[(PGPE, name) for name in ("stdev_init", "max_speed", "max_stdev", "stdev_learning_rate")],
+    (SimpleES, "sigma"),
+    *[(REINFORCE, name) for name in ("learning_rate", "gamma", "ent_coef", "max_grad_norm")],
+]
+
+
+@pytest.mark.parametrize(("cls", "name"), NUMBERS, ids=[f"{cls.__name__}-{name}" for cls, name in NUMBERS])
+def test_a_number_given_as_a_string_is_named(cls: type, name: str) -> None:
+    # YAML (1.1, as PyYAML reads it) takes 1e-2, without a dot, for a string
+    policy = "MlpPolicy" if cls is REINFORCE else "LinearPolicy"
+    with pytest.raises(TypeError, match=rf"{name}='1e-2': it must be a number \(a string; .* write 1.0e-2\)"):
+        cls(policy, "Pendulum-v1", **{name: "1e-2"})
+
+
+@pytest.mark.parametrize(
+    ("cls", "kwargs"),
+    [
+        (CMAES, dict(sigma=lambda _: 0.1)),
+        (PGPE, dict(stdev_init=lambda _: 0.1)),
+        (PGPE, dict(max_speed=lambda _: 0.1)),
+        (PGPE, dict(optimizer="adam", center_learning_rate=lambda _: 0.01)),
+    ],
+)
+def test_a_schedule_where_none_is_taken_is_named(cls: type, kwargs: dict[str, Any]) -> None:
+    name = next(key for key, value in kwargs.items() if callable(value))
+    with pytest.raises(TypeError, match=rf"{name}=<function .*: it must be a number \({name} takes no schedule\)"):
+        cls("LinearPolicy", "Pendulum-v1", **kwargs)
+
+
+@pytest.mark.parametrize(
+    ("cls", "kwargs"),
+    [
+        *[(cls, dict(common_seeds="no")) for cls in (ARS, OpenES, CMAES, PGPE, SimpleES)],
+        *[(cls, dict(zero_policy="False")) for cls in (ARS, OpenES, CMAES, PGPE, SimpleES)],
+        (ARS, dict(policy_kwargs=dict(normalize_observations="False"))),
+        (REINFORCE, dict(normalize_returns="false")),
+        (REINFORCE, dict(use_baseline="false")),
+    ],
+)
+def test_a_flag_given_as_a_string_is_named(cls: type, kwargs: dict[str, Any]) -> None:
+    # a non-empty string is true: "False" would switch the option on
+    policy = "MlpPolicy" if cls is REINFORCE else "LinearPolicy"
+    with pytest.raises(TypeError, match=r"(common_seeds='no'|\w+='(F|f)alse'): it must be True or False"):
+        cls(policy, "Pendulum-v1", **kwargs)
+
+
+@pytest.mark.parametrize("algo", ALGORITHMS)
+def test_max_episode_steps_above_the_envs_own_limit(algo: Algo) -> None:
+    # Pendulum-v1's TimeLimit ends every episode at 200 steps, whatever the cap
+    model = algo.make("Pendulum-v1", 2, max_episode_steps=300)
+    with pytest.raises(ValueError, match=r"max_episode_steps=300 is above the env's own time limit \(200 steps\)"):
+        model.learn(1)
 
 
 @pytest.mark.parametrize("algo", POPULATION_ALGORITHMS)

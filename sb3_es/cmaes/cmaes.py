@@ -11,9 +11,9 @@ from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback
 
 from sb3_es.cmaes.policies import FlatPolicy
 from sb3_es.common.arguments import base_arguments
-from sb3_es.common.population_algorithm import PopulationAlgorithm, check_positive
+from sb3_es.common.population_algorithm import PopulationAlgorithm
 from sb3_es.evaluation import PopulationEvaluator
-from sb3_es.strategies.base import check_count
+from sb3_es.strategies.base import check_count, check_positive_number
 from sb3_es.strategies.cmaes import CMAESStrategy, Restarts
 
 SelfCMAES = TypeVar("SelfCMAES", bound="CMAES")
@@ -70,7 +70,7 @@ class CMAES(PopulationAlgorithm):
         max_episode_steps: int | None = None,
         _init_setup_model: bool = True,
     ) -> None:
-        check_positive("sigma", sigma)
+        check_positive_number("sigma", sigma)
         if diagonal not in (True, False, "auto"):
             raise ValueError(f"diagonal={diagonal!r}: choose True, False or 'auto'.")
         super().__init__(**base_arguments(super().__init__, locals()))

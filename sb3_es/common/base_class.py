@@ -165,9 +165,16 @@ class ESBaseAlgorithm(BaseAlgorithm):
         time limit of its own.
 
         :return: The cap, in env steps.
+        :raises ValueError: When ``max_episode_steps`` is above the env's own time limit, which ends episodes first.
         """
         limit = env_time_limit(self.env) if self.env is not None else None
         if self.max_episode_steps is not None:
+            if limit is not None and self._added_time_limit is None and self.max_episode_steps > limit:
+                raise ValueError(
+                    f"max_episode_steps={self.max_episode_steps} is above the env's own time limit ({limit} steps), "
+                    f"which ends every episode first: pass at most {limit}, or give an env made with the longer "
+                    f"limit (gym.make(env_id, max_episode_steps={self.max_episode_steps}))."
+                )
             return self.max_episode_steps
         if limit is not None and self._added_time_limit is None:
             return limit

@@ -7,6 +7,8 @@ import numbers
 import numpy as np
 from stable_baselines3.common.type_aliases import Schedule
 
+from sb3_es.strategies.base import check_number
+
 
 def check_positive(name: str, value: float | Schedule) -> None:
     """
@@ -15,7 +17,7 @@ def check_positive(name: str, value: float | Schedule) -> None:
     :param name: Hyperparameter name, for the message.
     :param value: A float or a schedule ``progress_remaining -> value``.
     """
-    start = value(1.0) if callable(value) else value
+    start = check_number(name, value(1.0) if callable(value) else value)
     if not np.isfinite(start) or start <= 0:
         raise ValueError(f"{name}={start}: it must be a positive number (got {value!r}).")
 
@@ -47,7 +49,7 @@ def check_non_negative(name: str, value: float) -> None:
     :param name: Hyperparameter name, for the message.
     :param value: Its value.
     """
-    if not (isinstance(value, numbers.Real) and np.isfinite(value) and value >= 0):
+    if not (np.isfinite(check_number(name, value)) and value >= 0):
         raise ValueError(f"{name}={value!r}: it must be a finite number >= 0.")
 
 

@@ -32,6 +32,7 @@ from sb3_es.common.net_arch import split_net_arch
 from sb3_es.common.network_layout import network_layers
 from sb3_es.evaluation.network import OBS_NORM_EPS, NetworkSpec
 from sb3_es.evaluation.observations import flat_obs_dim
+from sb3_es.strategies.base import check_flag
 
 __all__ = ["OBS_NORM_EPS", "FlatPolicy", "LinearPolicy", "MlpPolicy", "flat_obs_dim"]
 
@@ -96,8 +97,8 @@ class FlatPolicy(BasePolicy):
         self.net_arch = [64, 64] if pi_arch is None else pi_arch
         self.activation_fn = activation_fn
         self.with_bias = with_bias
-        self.layer_norm = layer_norm
-        self.normalize_observations = normalize_observations
+        self.layer_norm = check_flag("layer_norm", layer_norm)
+        self.normalize_observations = check_flag("normalize_observations", normalize_observations)
         layers = create_mlp(
             obs_dim,
             action_dim,
@@ -281,6 +282,11 @@ class LinearPolicy(FlatPolicy):
     ) -> None:
         if net_arch:
             raise ValueError(f"LinearPolicy has no hidden layers (got net_arch={net_arch}); use MlpPolicy instead.")
+        if layer_norm or activation_fn is not nn.ReLU:
+            raise ValueError(
+                f"LinearPolicy has no hidden layers, so layer_norm={layer_norm!r} and activation_fn="
+                f"{getattr(activation_fn, '__name__', activation_fn)} would do nothing: use MlpPolicy for them."
+            )
         super().__init__(
             observation_space,
             action_space,

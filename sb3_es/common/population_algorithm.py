@@ -22,7 +22,7 @@ from sb3_es.common.remote_monitor import align_clock, write_remote_episodes
 from sb3_es.common.step_calls import StepCalls
 from sb3_es.common.strategy_algorithm import StrategyAlgorithm, check_noise_table_size, initial_value, make_noise_table
 from sb3_es.evaluation import PopulationEvaluator, PopulationResult, RewardShaping
-from sb3_es.strategies.base import check_count
+from sb3_es.strategies.base import check_count, check_flag
 
 SelfPopulationAlgorithm = TypeVar("SelfPopulationAlgorithm", bound="PopulationAlgorithm")
 
@@ -130,12 +130,12 @@ class PopulationAlgorithm(StrategyAlgorithm):
         if learning_rate is not None:
             check_positive("learning_rate", learning_rate)
         self.n_eval_episodes = int(n_eval_episodes)
-        self.common_seeds = bool(common_seeds)
+        self.common_seeds = check_flag("common_seeds", common_seeds)
         shaping = RewardShaping.create(reward_clip, terminal_reward, alive_bonus_offset)
         self.alive_bonus_offset = shaping.alive_bonus_offset
         self.reward_clip = shaping.reward_clip
         self.terminal_reward = shaping.terminal_reward
-        self.zero_policy = zero_policy
+        self.zero_policy = check_flag("zero_policy", zero_policy)
         self.strategy = None
         self._env_rng = None
         check_evaluator(evaluator, self._env_id, self.env)

@@ -20,7 +20,7 @@ from sb3_es.common.population_algorithm import (
 )
 from sb3_es.evaluation import PopulationEvaluator
 from sb3_es.openes.policies import FlatPolicy
-from sb3_es.strategies.base import check_count
+from sb3_es.strategies.base import check_count, check_number
 from sb3_es.strategies.openes import FitnessShaping, OpenESStrategy
 from sb3_es.strategies.optimizers import OptimizerName
 
@@ -30,7 +30,7 @@ SelfOpenES = TypeVar("SelfOpenES", bound="OpenES")
 def check_decays(sigma: Any, sigma_decay: float, learning_rate: Any, learning_rate_decay: float) -> None:
     """:raises ValueError: For a decay outside (0, 1], or one given with a schedule (which sets the value itself)."""
     for name, value, rate in (("sigma", sigma, sigma_decay), ("learning_rate", learning_rate, learning_rate_decay)):
-        if not 0 < rate <= 1:
+        if not 0 < check_number(f"{name}_decay", rate) <= 1:
             raise ValueError(f"{name}_decay={rate}: it must be in (0, 1].")
         if callable(value) and rate != 1:
             raise ValueError(
@@ -125,6 +125,15 @@ class OpenES(PopulationAlgorithm):
             check_non_negative(name, limit)
         check_non_negative("weight_decay", weight_decay)
         check_decays(sigma, sigma_decay, learning_rate, learning_rate_decay)
+        for name, value, rate, limit in (
+            ("sigma", sigma, sigma_decay, sigma_limit),
+            ("learning_rate", learning_rate, learning_rate_decay, learning_rate_limit),
+        ):
+            if rate != 1 and not callable(value) and value <= limit:  # estool decays only a value above its limit
+                raise ValueError(
+                    f"{name}_decay={rate} would never apply: {name}={value} starts at or below {name}_limit={limit}, "
+                    f"where the decay stops. Lower {name}_limit, or leave {name}_decay at 1."
+                )
         super().__init__(**base_arguments(super().__init__, locals()))
         self.population_size = check_count("population_size", population_size, 2)
         self.sigma = sigma

@@ -9,10 +9,10 @@ import torch as th
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback
 
 from sb3_es.common.arguments import base_arguments
-from sb3_es.common.population_algorithm import PopulationAlgorithm, check_positive
+from sb3_es.common.population_algorithm import PopulationAlgorithm
 from sb3_es.evaluation import PopulationEvaluator
 from sb3_es.pgpe.policies import FlatPolicy
-from sb3_es.strategies.base import check_count
+from sb3_es.strategies.base import check_count, check_positive_number
 from sb3_es.strategies.fitness import FitnessShaping
 from sb3_es.strategies.optimizers import OptimizerName
 from sb3_es.strategies.pgpe import PGPEStrategy
@@ -26,7 +26,7 @@ def check_step_sizes(optimizer: str, max_speed: float | None, center_learning_ra
     """
     for name, value in (("max_speed", max_speed), ("center_learning_rate", center_learning_rate)):
         if value is not None:
-            check_positive(name, value)
+            check_positive_number(name, value)
     if optimizer != "clipup" and (center_learning_rate is None or max_speed is not None):
         raise ValueError(
             f"optimizer={optimizer!r} with center_learning_rate={center_learning_rate}, max_speed={max_speed}: pass "

@@ -26,7 +26,7 @@ from sb3_es.evaluation.time_limit import end_capped_episodes
 from sb3_es.reinforce.episodes import EpisodeBatch, EpisodeCollector, check_rewards
 from sb3_es.reinforce.legacy import upgrade_legacy_optimizer_state
 from sb3_es.reinforce.policies import DiscretizedPolicy, MlpPolicy, MultiInputPolicy, check_action_space
-from sb3_es.strategies.base import check_count
+from sb3_es.strategies.base import check_count, check_flag, check_number
 
 SelfREINFORCE = TypeVar("SelfREINFORCE", bound="REINFORCE")
 
@@ -104,12 +104,12 @@ class REINFORCE(ESBaseAlgorithm):
     @classmethod
     def _check_live_values(cls, values: dict[str, Any]) -> None:
         check_count("n_episodes", values.get("n_episodes", 1))
-        if not 0.0 <= values.get("gamma", 0.0) <= 1.0:
+        if not 0.0 <= check_number("gamma", values.get("gamma", 0.0)) <= 1.0:
             raise ValueError(f"gamma={values['gamma']}: the discount factor must be in [0, 1].")
         max_grad_norm = values.get("max_grad_norm")
-        if max_grad_norm is not None and not max_grad_norm > 0:
+        if max_grad_norm is not None and not check_number("max_grad_norm", max_grad_norm) > 0:
             raise ValueError(f"max_grad_norm={max_grad_norm}: it must be a positive number or None.")
-        if not np.isfinite(values.get("ent_coef", 0.0)):
+        if not np.isfinite(check_number("ent_coef", values.get("ent_coef", 0.0))):
             raise ValueError(f"ent_coef={values['ent_coef']}: it must be a finite number.")
         if "learning_rate" in values:
             check_positive("learning_rate", values["learning_rate"])
@@ -159,8 +159,8 @@ class REINFORCE(ESBaseAlgorithm):
             check_action_space(self.action_space)
         self.n_episodes = int(n_episodes)
         self.gamma = float(gamma)
-        self.normalize_returns = normalize_returns
-        self.use_baseline = use_baseline
+        self.normalize_returns = check_flag("normalize_returns", normalize_returns)
+        self.use_baseline = check_flag("use_baseline", use_baseline)
         self.ent_coef = float(ent_coef)
         self.max_grad_norm = max_grad_norm
         #: Random generator of the per-update env and sampling seeds (saved with the model).

@@ -172,9 +172,38 @@ def check_count(name: str, value: Any, minimum: int = 1) -> int:
     return int(number)
 
 
-def check_positive_number(name: str, value: float) -> None:
-    """:raises ValueError: Naming ``name`` when ``value`` is not a finite number above 0."""
-    if not (np.isfinite(value) and value > 0):
+def check_number(name: str, value: Any) -> float:
+    """
+    :param name: Hyperparameter name, for the message.
+    :param value: A number (not a bool).
+    :return: ``value`` as a float.
+    :raises TypeError: Naming ``name`` when ``value`` is not a number: a string (as YAML reads ``1e-2``), or a
+        schedule given where none is taken.
+    """
+    if isinstance(value, numbers.Real) and not isinstance(value, bool):
+        return float(value)
+    hint = ""
+    if isinstance(value, str):
+        hint = " (a string; a YAML file reads a number without a dot, such as 1e-2, as one: write 1.0e-2)"
+    elif callable(value):
+        hint = f" ({name} takes no schedule)"
+    raise TypeError(f"{name}={value!r}: it must be a number{hint}.")
+
+
+def check_flag(name: str, value: Any) -> bool:
+    """
+    :return: ``value`` as a bool.
+    :raises TypeError: Naming ``name`` when ``value`` is not True or False (a string such as ``"False"`` would
+        count as true).
+    """
+    if isinstance(value, bool | np.bool_):
+        return bool(value)
+    raise TypeError(f"{name}={value!r}: it must be True or False.")
+
+
+def check_positive_number(name: str, value: Any) -> None:
+    """:raises ValueError: Naming ``name`` when ``value`` is not a finite number above 0 (TypeError: no number)."""
+    if not (np.isfinite(check_number(name, value)) and value > 0):
         raise ValueError(f"{name}={value}: it must be a positive number.")
 
 

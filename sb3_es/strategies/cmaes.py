@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
-from sb3_es.strategies.base import Strategy, check_count
+from sb3_es.strategies.base import Strategy, check_count, check_positive_number
 
 if TYPE_CHECKING:
     import cma
@@ -102,8 +102,7 @@ class CMAESStrategy(Strategy):
         seed: int | np.random.SeedSequence | None = None,
     ) -> None:
         super().__init__(center, seed)
-        if not (np.isfinite(sigma) and sigma > 0):
-            raise ValueError(f"sigma={sigma}: the initial step size must be positive.")
+        check_positive_number("sigma", sigma)
         if population_size is not None:
             population_size = check_count("population_size", population_size, 2)
         if restarts not in (None, "ipop", "bipop"):

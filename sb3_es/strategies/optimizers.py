@@ -14,7 +14,7 @@ from typing import Any, Literal
 import numpy as np
 import torch as th
 
-from sb3_es.strategies.base import Strategy, check_positive_number
+from sb3_es.strategies.base import Strategy, check_number, check_positive_number
 
 OptimizerName = Literal["adam", "sgd", "clipup"]
 #: The optimizer names, for validation messages.
@@ -41,9 +41,8 @@ class ClipUp(th.optim.Optimizer):
     ) -> None:
         max_speed = 2 * lr if max_speed is None else max_speed
         for name, value in (("lr", lr), ("max_speed", max_speed)):
-            if not (np.isfinite(value) and value > 0):
-                raise ValueError(f"ClipUp {name}={value}: it must be a positive number.")
-        if not 0 <= momentum < 1:
+            check_positive_number(f"ClipUp {name}", value)
+        if not 0 <= check_number("ClipUp momentum", momentum) < 1:
             raise ValueError(f"ClipUp momentum={momentum}: it must be in [0, 1).")
         super().__init__(params, dict(lr=lr, max_speed=max_speed, momentum=momentum))
 
@@ -95,7 +94,8 @@ def make_optimizer(
     :param max_speed: ClipUp's largest step (``None``: ``2 * learning_rate``); only for ClipUp.
     :return: The optimizer.
     """
-    if not 0 <= momentum < 1:  # checked whichever optimizer, as a value that is not used is still a mistake
+    # checked whichever optimizer, as a value that is not used is still a mistake
+    if not 0 <= check_number("momentum", momentum) < 1:
         raise ValueError(f"momentum={momentum}: the SGD and ClipUp momentum must be in [0, 1).")
     if max_speed is not None and name != "clipup":
         raise ValueError(f"max_speed={max_speed} is a ClipUp setting; it has no effect with optimizer={name!r}.")

@@ -6,7 +6,7 @@ from typing import Any
 
 import numpy as np
 
-from sb3_es.strategies.base import check_count, check_positive_number, mirrored_groups
+from sb3_es.strategies.base import check_count, check_number, check_positive_number, mirrored_groups
 from sb3_es.strategies.fitness import FitnessShaping, shape_fitness
 from sb3_es.strategies.optimizers import GradientStrategy, OptimizerName
 
@@ -65,12 +65,12 @@ class PGPEStrategy(GradientStrategy):
         self.population_size = population_size
         check_positive_number("stdev_init", stdev_init)
         self.stdev = np.full(self.num_params, float(stdev_init))
-        self.stdev_learning_rate = float(stdev_learning_rate)
-        self.stdev_max_change = float(stdev_max_change)
+        self.stdev_learning_rate = check_number("stdev_learning_rate", stdev_learning_rate)
+        self.stdev_max_change = check_number("stdev_max_change", stdev_max_change)
         self.fitness_shaping = fitness_shaping
-        self.max_stdev = None if max_stdev is None else float(max_stdev)
+        self.max_stdev = None if max_stdev is None else check_number("max_stdev", max_stdev)
         self.check_settings()
-        if max_stdev is not None and max_stdev < stdev_init:
+        if self.max_stdev is not None and self.max_stdev < stdev_init:
             raise ValueError(f"stdev_init={stdev_init} is above max_stdev={max_stdev}: lower it, or raise max_stdev.")
         self._scaled_noise: np.ndarray | None = None
 
