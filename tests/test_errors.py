@@ -122,6 +122,11 @@ BAD_HYPERPARAMETERS = [
     *each(REINFORCE, "policy_kwargs", [dict(net_arch=dict(pi=[8], qf=[8]))], r"unknown entry \['qf'\]"),
     *each(REINFORCE, "policy_kwargs", [dict(joint=True, max_joint_actions=1000.7)], "max_joint_actions=1000.7"),
     *each(REINFORCE, "policy_kwargs", [dict(value_net_arch=[7])], r"value_net_arch=\[7\] gives .* use_baseline=True"),
+    *[
+        param
+        for cls in (ARS, OpenES, CMAES, PGPE, SimpleES, REINFORCE)
+        for param in each(cls, "stats_window_size", [0, -1])
+    ],
     *each(OpenES, "learning_rate_decay", [0.9], r"learning_rate_decay=0.9 would never apply", learning_rate=0.0005),
     *each(OpenES, "sigma_decay", [0.99], r"sigma_decay=0.99 would never apply", sigma=0.005),
     *[

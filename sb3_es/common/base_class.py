@@ -140,7 +140,7 @@ class ESBaseAlgorithm(BaseAlgorithm):
             env,
             learning_rate=constant_value(learning_rate),  # type: ignore[arg-type]  # None: it has none
             policy_kwargs=policy_kwargs,
-            stats_window_size=stats_window_size,
+            stats_window_size=check_count("stats_window_size", stats_window_size),
             tensorboard_log=tensorboard_log,
             verbose=verbose,
             device=self._auto_device if isinstance(device, str) and device == "auto" else device,
