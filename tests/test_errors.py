@@ -69,6 +69,7 @@ BAD_HYPERPARAMETERS = [
     *each(CMAES, "population_size", [1, 0, -3, 5.5]),
     *each(CMAES, "sigma", [0.0, -0.1, NAN, INF]),
     *each(CMAES, "max_restarts", [-1, 1.5, NAN], r"max_restarts=(-1|1.5|nan): it must be (at least 0|a whole number)"),
+    *each(CMAES, "max_restarts", [3], r"max_restarts=3 has no effect without restarts", restarts=None),
     *each(SimpleES, "noise_table_size", [1000.5, 0]),
     *each(CMAES, "diagonal", ["yes"]),
     *each(CMAES, "restarts", ["lpop"]),

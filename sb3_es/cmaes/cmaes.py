@@ -16,6 +16,9 @@ from sb3_es.evaluation import PopulationEvaluator
 from sb3_es.strategies.base import check_count, check_positive_number
 from sb3_es.strategies.cmaes import CMAESStrategy, Restarts
 
+#: Restarts allowed with ``restarts="ipop"`` or ``"bipop"`` unless ``max_restarts`` is given.
+DEFAULT_MAX_RESTARTS = 9
+
 SelfCMAES = TypeVar("SelfCMAES", bound="CMAES")
 
 
@@ -33,7 +36,7 @@ class CMAES(PopulationAlgorithm):
     :param diagonal: ``True`` for separable (diagonal) CMA-ES, ``False`` for full covariance, ``"auto"``
         for full covariance up to ``DIAGONAL_THRESHOLD`` parameters.
     :param restarts: ``None``, ``"ipop"`` or ``"bipop"``.
-    :param max_restarts: Maximum number of restarts.
+    :param max_restarts: Maximum number of restarts (only with ``restarts``: given without, it is an error).
     :param cma_options: Other pycma options, passed through.
 
     The other parameters are those of :class:`~sb3_es.common.population_algorithm.PopulationAlgorithm`.
@@ -52,7 +55,7 @@ class CMAES(PopulationAlgorithm):
         population_size: int | None = None,
         diagonal: bool | str = "auto",
         restarts: Restarts = None,
-        max_restarts: int = 9,
+        max_restarts: int = DEFAULT_MAX_RESTARTS,
         cma_options: dict[str, Any] | None = None,
         zero_policy: bool = False,
         alive_bonus_offset: float = 0,
@@ -79,6 +82,11 @@ class CMAES(PopulationAlgorithm):
         self.diagonal = diagonal
         self.restarts = restarts
         self.max_restarts = check_count("max_restarts", max_restarts, 0)
+        if restarts is None and self.max_restarts != DEFAULT_MAX_RESTARTS:
+            raise ValueError(
+                f"max_restarts={max_restarts} has no effect without restarts: pass restarts='ipop' or 'bipop', or "
+                "drop max_restarts."
+            )
         self.cma_options = cma_options
         if _init_setup_model:
             self._setup_model()
