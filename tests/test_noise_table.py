@@ -67,3 +67,6 @@ def test_bad_noise_table_size() -> None:
         ARS("LinearPolicy", "CartPole-v1", noise_table_size=0)
     with pytest.raises(ValueError, match="smaller than one perturbation"):
         ARS("MlpPolicy", "CartPole-v1", noise_table_size=100).learn(100)
+    # CartPole's linear policy has 4 x 2 parameters: a 10-value table has 3 slices for 8 directions
+    with pytest.raises(ValueError, match=r"holds 3 distinct perturbations of 8 parameters, fewer than the 8"):
+        ARS("LinearPolicy", "CartPole-v1", n_delta=8, noise_table_size=10).learn(100)

@@ -56,6 +56,12 @@ class SharedNoiseTable:
         """
         if dim > self.size:
             raise ValueError(f"The noise table ({self.size} values) is smaller than one perturbation ({dim}).")
+        if self.size - dim + 1 < n:  # fewer slices than perturbations: some candidates would share a direction
+            raise ValueError(
+                f"The noise table ({self.size} values) holds {self.size - dim + 1} distinct perturbations of {dim} "
+                f"parameters, fewer than the {n} of a generation: raise noise_table_size well above {dim + n - 1} "
+                "(tables of millions of values are usual), or pass None to draw every perturbation afresh."
+            )
         return rng.integers(0, self.size - dim + 1, size=n)
 
     def __getstate__(self) -> dict[str, int]:
