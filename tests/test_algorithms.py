@@ -125,6 +125,7 @@ def test_callback_stop_discards_interrupted_generation(algo: Algo, offset: int) 
     assert len(recorder.rollout_starts) == 3
     stop_at = recorder.rollout_starts[2] + offset
     assert recorder.n_calls == stop_at  # stopped within that very vec step
+    assert recorder.rollout_ends == 2  # as SB3's collect_rollouts: no on_rollout_end for the rollout cut short
     assert model.num_timesteps == stop_at * 2 == counter[0]
     assert_updates(algo, model, 2)
     # The parameters and the observation statistics are those of the last completed update.
@@ -159,6 +160,31 @@ def test_callback_stop_on_last_step_of_a_generation_keeps_it(algo: Algo) -> None
     assert len(recorder.rollout_starts) == 2
     assert not np.array_equal(policy_vector(model), recorder.params_at_start[1])
     np.testing.assert_array_equal(policy_vector(model), model.strategy.center.astype(np.float32))
+
+
+class RolloutEndView(BaseCallback):
+    """What a callback sees at each ``on_rollout_end``: the episodes in the model's buffer, and a step's locals."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.buffered: list[int] = []
+        self.step_locals: set[str] = set()
+
+    def _on_step(self) -> bool:
+        self.step_locals = set(self.locals)
+        return True
+
+    def _on_rollout_end(self) -> None:
+        self.buffered.append(len(self.model.ep_info_buffer))
+
+
+@pytest.mark.parametrize("algo", ALGORITHMS)
+def test_rollout_end_sees_the_rollouts_episodes(algo: Algo) -> None:
+    # PPO's ep_info_buffer holds a rollout's episodes when on_rollout_end is called, and its step locals name the env
+    view = RolloutEndView()
+    pendulum_model(algo).learn(3 * GENERATION, callback=view)
+    assert view.buffered == [2, 4, 6]  # 2 candidate episodes (or 2 episodes per update) per generation
+    assert {"env", "infos", "dones", "rewards", "new_obs", "actions"} <= view.step_locals
 
 
 @pytest.mark.parametrize("algo", ALGORITHMS)

@@ -211,14 +211,16 @@ def test_subproc_vec_env() -> None:
         env.close()
 
 
-def test_vec_normalize_wrapper() -> None:
-    env = VecNormalize(make_vec_env("Pendulum-v1", n_envs=2), norm_reward=False)
+@pytest.mark.parametrize("norm_reward", [False, True])
+def test_vec_normalize_wrapper(norm_reward: bool) -> None:
+    env = VecNormalize(make_vec_env("Pendulum-v1", n_envs=2), norm_reward=norm_reward)
     policy = LinearPolicy(env.observation_space, env.action_space, normalize_observations=False)
     population = make_population(policy, 2, scale=0.3)
     result, hook_calls = evaluate_counting(VecEnvEvaluator(env), policy, population, 1)
     assert np.all(result.lengths == 200)
     assert result.n_steps == 2 * hook_calls
-    # With norm_reward=False, returns are the raw returns reported by the Monitor below VecNormalize.
+    # Returns are the raw returns reported by the Monitor below VecNormalize, also with norm_reward=True (whose scale
+    # changes within the generation: the first candidates' rewards would be scaled otherwise than the last ones').
     monitor_returns = sorted(info["r"] for info in result.ep_infos)
     np.testing.assert_allclose(sorted(result.returns.ravel()), monitor_returns, rtol=1e-4, atol=1e-3)
     # The policy sees the normalized observations (VecNormalize statistics were updated while stepping).

@@ -283,6 +283,7 @@ class PopulationAlgorithm(StrategyAlgorithm):
             self.num_timesteps += n_envs
             callback.update_locals(
                 {
+                    "env": self.env,
                     "infos": infos,
                     "dones": dones,
                     "n_envs": n_envs,
@@ -308,12 +309,11 @@ class PopulationAlgorithm(StrategyAlgorithm):
             max_episode_steps=self.episode_step_limit(),
             reset_seeds=reset_seeds,
         )
-        stopped = result.stopped or calls.dropped
-        if not stopped:
-            calls.flush()
-        callback.on_rollout_end()
-        if stopped:
+        if result.stopped or calls.dropped:  # as SB3's collect_rollouts: no on_rollout_end for a rollout cut short
             return False
+        calls.flush()
+        self._record_episodes(result)  # before on_rollout_end, so that callbacks see this generation's episodes
+        callback.on_rollout_end()
         stats = result.obs_stats
         if stats.n_nonfinite and self.policy.normalize_observations:
             warnings.warn(
@@ -343,18 +343,26 @@ class PopulationAlgorithm(StrategyAlgorithm):
         group_seeds = self._env_rng.integers(2**31 - 1, size=(int(groups.max()) + 1, self.n_eval_episodes))
         return group_seeds[groups]
 
-    def _record_generation(self, result: PopulationResult, fitness: np.ndarray) -> None:
+    def _record_episodes(self, result: PopulationResult) -> None:
         """
-        Update the episode buffer and record this generation's statistics.
+        Add the generation's candidate episodes to the episode buffers (and to the Monitor files, for episodes run
+        in other processes).
 
         :param result: The evaluation results.
-        :param fitness: The fitness given to the strategy.
         """
         assert self.ep_success_buffer is not None
         self._update_info_buffer([{"episode": info} for info in result.ep_infos])
         if self._evaluator is not None:
             write_remote_episodes(self.env, self._evaluator, result.ep_infos)
         self.ep_success_buffer.extend(result.successes)
+
+    def _record_generation(self, result: PopulationResult, fitness: np.ndarray) -> None:
+        """
+        Record this generation's statistics.
+
+        :param result: The evaluation results.
+        :param fitness: The fitness given to the strategy.
+        """
         self.logger.record("rollout/candidate_return_mean", float(result.returns.mean()))
         self.logger.record("rollout/candidate_return_max", float(result.returns.mean(axis=1).max()))
         self.logger.record("rollout/fitness_mean", float(fitness.mean()))

@@ -6,7 +6,7 @@ from collections import deque
 from collections.abc import Callable
 
 import numpy as np
-from stable_baselines3.common.vec_env import VecEnv
+from stable_baselines3.common.vec_env import VecEnv, unwrap_vec_normalize
 
 from sb3_es.evaluation.base import Generation, PopulationEvaluator, PopulationResult, StepHook
 from sb3_es.evaluation.slot_reset import can_reset_slots, reset_slot
@@ -27,7 +27,8 @@ class VecEnvEvaluator(PopulationEvaluator):
     generation the VecEnv is re-seeded and reset, so a generation's outcome depends only on the seed
     and the parameters. With the generation's ``reset_seeds``, each candidate episode starts with its slot
     reset with that episode's seed (common random numbers; not through a ``VecEnvWrapper``, which would not see
-    the reset).
+    the reset). Returns and fitness are the env's own reward: through a ``VecNormalize`` that normalizes rewards, its
+    original reward (its scale changes within a generation, and would rank candidates on different scales).
 
     :param env: The vectorized environment.
     """
@@ -70,6 +71,9 @@ class VecEnvEvaluator(PopulationEvaluator):
                 "without VecEnv wrappers (normalize observations with the policy's normalize_observations instead of "
                 "VecNormalize), or set common_seeds=False."
             )
+        vec_normalize = unwrap_vec_normalize(env)
+        if vec_normalize is not None and not vec_normalize.norm_reward:
+            vec_normalize = None  # its rewards are the env's
         n_envs = env.num_envs
         result = generation.empty_result()
         returns, lengths, shaped_returns = result.returns, result.lengths, result.shaped_returns
@@ -120,12 +124,13 @@ class VecEnvEvaluator(PopulationEvaluator):
             seen += len(rows)
             actions = network(slot_params, flat_obs)
             obs, rewards, dones, infos = env.step(actions)
+            env_rewards = rewards if vec_normalize is None else vec_normalize.get_original_reward()
             result.n_steps += n_envs
-            ep_return += rewards
+            ep_return += env_rewards
             ep_length += 1
             end_capped_episodes(env, generation.max_episode_steps, ep_length, obs, dones, infos)  # type: ignore[arg-type]
             if shaping is not None and shaped_returns is not None:
-                ep_shaped += shaping(rewards, dones, infos)
+                ep_shaped += shaping(env_rewards, dones, infos)
             for slot in np.flatnonzero(dones).tolist():
                 job = slot_job[slot]
                 if job is None:
