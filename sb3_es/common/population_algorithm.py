@@ -236,6 +236,7 @@ class PopulationAlgorithm(StrategyAlgorithm):
             if not self._run_generation(evaluator, callback):
                 break
             self._n_updates += 1
+            self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")  # as SB3's PPO
             iteration += 1
             if log_interval is not None and iteration % log_interval == 0:
                 self.dump_logs(iteration)
