@@ -27,11 +27,28 @@ from sb3_es.strategies.optimizers import OptimizerName
 SelfOpenES = TypeVar("SelfOpenES", bound="OpenES")
 
 
-def check_decays(sigma: Any, sigma_decay: float, learning_rate: Any, learning_rate_decay: float) -> None:
-    """:raises ValueError: For a decay outside (0, 1], or one given with a schedule (which sets the value itself)."""
-    for name, value, rate in (("sigma", sigma, sigma_decay), ("learning_rate", learning_rate, learning_rate_decay)):
+def check_decays(
+    sigma: Any,
+    sigma_decay: float,
+    learning_rate: Any,
+    learning_rate_decay: float,
+    limits: tuple[float, float] | None = None,
+) -> None:
+    """
+    :param limits: ``sigma_limit`` and ``learning_rate_limit``, to check that a decay applies to the starting values
+        (at construction; a value later decayed to its limit is expected).
+    :raises ValueError: For a decay outside (0, 1], one given with a schedule (which sets the value itself), or one
+        that would never apply.
+    """
+    pairs = (("sigma", sigma, sigma_decay), ("learning_rate", learning_rate, learning_rate_decay))
+    for (name, value, rate), limit in zip(pairs, limits or (None, None), strict=True):
         if not 0 < check_number(f"{name}_decay", rate) <= 1:
             raise ValueError(f"{name}_decay={rate}: it must be in (0, 1].")
+        if limit is not None and rate != 1 and not callable(value) and value <= limit:  # estool: only above it
+            raise ValueError(
+                f"{name}_decay={rate} would never apply: {name}={value} starts at or below {name}_limit={limit}, "
+                f"where the decay stops. Lower {name}_limit, or leave {name}_decay at 1."
+            )
         if callable(value) and rate != 1:
             raise ValueError(
                 f"{name}_decay={rate} decays a float {name}, but {name} is a schedule, which sets every "
@@ -124,16 +141,7 @@ class OpenES(PopulationAlgorithm):
         for name, limit in (("sigma_limit", sigma_limit), ("learning_rate_limit", learning_rate_limit)):
             check_non_negative(name, limit)
         check_non_negative("weight_decay", weight_decay)
-        check_decays(sigma, sigma_decay, learning_rate, learning_rate_decay)
-        for name, value, rate, limit in (
-            ("sigma", sigma, sigma_decay, sigma_limit),
-            ("learning_rate", learning_rate, learning_rate_decay, learning_rate_limit),
-        ):
-            if rate != 1 and not callable(value) and value <= limit:  # estool decays only a value above its limit
-                raise ValueError(
-                    f"{name}_decay={rate} would never apply: {name}={value} starts at or below {name}_limit={limit}, "
-                    f"where the decay stops. Lower {name}_limit, or leave {name}_decay at 1."
-                )
+        check_decays(sigma, sigma_decay, learning_rate, learning_rate_decay, (sigma_limit, learning_rate_limit))
         super().__init__(**base_arguments(super().__init__, locals()))
         self.population_size = check_count("population_size", population_size, 2)
         self.sigma = sigma
