@@ -146,6 +146,28 @@ def test_get_set_parameters(algo: Algo) -> None:
         np.testing.assert_allclose(centers[0], weights, atol=1e-6)
 
 
+@pytest.mark.parametrize("algo", POPULATION_ALGORITHMS)
+@pytest.mark.parametrize("write", ["load_from_vector", "load_state_dict"])
+def test_weights_written_into_the_policy_are_where_training_and_save_go_on(
+    algo: Algo, write: str, tmp_path: Path
+) -> None:
+    # As with SB3's own algorithms, weights written straight into model.policy (e.g. best_params) are kept.
+    source = build(algo, seed=1)
+    source.learn(2 * GENERATION)
+    weights = source.policy.parameters_to_vector()
+    target = build(algo)
+    if write == "load_from_vector":
+        target.policy.load_from_vector(weights)
+    else:
+        target.policy.load_state_dict(source.policy.state_dict())
+    target.save(tmp_path / "model.zip")
+    loaded = algo.cls.load(tmp_path / "model.zip")
+    np.testing.assert_array_equal(loaded.strategy.center.astype(np.float32), weights.astype(np.float32))
+    centers = spy_on_ask(target, lambda strategy, _: strategy.center.copy())
+    target.learn(GENERATION)
+    np.testing.assert_allclose(centers[0], weights, atol=1e-6)
+
+
 def test_set_parameters_from_file(saved: Saved) -> None:
     algo, source, path = saved
     target = build(algo, seed=1)

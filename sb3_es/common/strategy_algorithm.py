@@ -135,11 +135,13 @@ class StrategyAlgorithm(ESBaseAlgorithm):
 
     def _ask(self) -> Population:
         """
-        Write this generation's value of every scheduled hyperparameter into the strategy, then ask it.
+        Move the center to weights written into the policy since the last generation, write this generation's
+        value of every scheduled hyperparameter into the strategy, then ask it.
 
         :return: The candidates ``(population_size, num_params)``.
         """
         assert self.strategy is not None
+        self._follow_policy_weights(self.strategy)
         progress = self._current_progress_remaining
         for name in self.scheduled_hyperparameters:
             schedule = getattr(self, name)
@@ -154,7 +156,8 @@ class StrategyAlgorithm(ESBaseAlgorithm):
     def best_params(self) -> np.ndarray:
         """
         :return: Parameters of the best candidate seen (with ``forget_best``, of the latest generation); its
-            fitness is ``strategy.best_fitness``. Load them with ``policy.load_from_vector``.
+            fitness is ``strategy.best_fitness``. Load them with ``policy.load_from_vector``; training and
+            ``save()`` then go on from them.
         """
         assert self.strategy is not None
         return self.strategy.best_params
@@ -173,6 +176,7 @@ class StrategyAlgorithm(ESBaseAlgorithm):
         strategy = self.strategy
         if strategy is not None:
             self.strategy = strategy.without_pending()
+            self._follow_policy_weights(self.strategy)  # the saved center is the policy's weights
         try:
             super().save(path, exclude, include)
         finally:
@@ -185,11 +189,20 @@ class StrategyAlgorithm(ESBaseAlgorithm):
         device: th.device | str = "auto",
     ) -> None:
         super().set_parameters(load_path_or_dict, exact_match=exact_match, device=device)
-        # Keep the strategy's center in step with weights written into the policy from outside.
         assert self.strategy is not None
+        self._follow_policy_weights(self.strategy)
+
+    def _follow_policy_weights(self, strategy: Strategy) -> None:
+        """
+        Move ``strategy``'s center to the policy's weights where they were written into the policy from outside
+        (``set_parameters``, ``policy.load_from_vector(model.best_params)``, ``policy.load_state_dict``), so
+        that training and ``save()`` go on from the weights the policy has, as with SB3's own algorithms.
+
+        :param strategy: The strategy (or a saved snapshot of it) whose center follows the policy.
+        """
         vector = self.policy.parameters_to_vector()
-        if not np.array_equal(vector.astype(np.float32), self.strategy.center.astype(np.float32)):
-            self.strategy.set_center(vector)
+        if not np.array_equal(vector.astype(np.float32), strategy.center.astype(np.float32)):
+            strategy.set_center(vector)
 
     @classmethod
     def _check_save_data(cls, path: str | pathlib.Path | io.BufferedIOBase, data: dict[str, Any]) -> None:
