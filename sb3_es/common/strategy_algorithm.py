@@ -175,8 +175,10 @@ class StrategyAlgorithm(ESBaseAlgorithm):
         """
         strategy = self.strategy
         if strategy is not None:
+            # The saved center is the policy's weights. Moved on the model's strategy, not on the shallow snapshot,
+            # whose set_center could write into state it shares with the model's (the optimizers' parameter tensor).
+            self._follow_policy_weights(strategy)
             self.strategy = strategy.without_pending()
-            self._follow_policy_weights(self.strategy)  # the saved center is the policy's weights
         try:
             super().save(path, exclude, include)
         finally:
