@@ -18,8 +18,9 @@ import torch as th
 from algorithms import ALGORITHMS, POPULATION_ALGORITHMS, Algo
 from envs import MultiDiscreteActionEnv
 from stable_baselines3.common.env_util import make_vec_env
-from stable_baselines3.common.policies import BasePolicy
+from stable_baselines3.common.policies import ActorCriticPolicy, BasePolicy
 
+import sb3_es
 from sb3_es import ARS, CMAES, PGPE, REINFORCE, OpenES, SimpleES
 from sb3_es.evaluation import VecEnvEvaluator
 
@@ -166,6 +167,43 @@ def test_a_number_given_as_a_string_is_named(cls: type, name: str) -> None:
         cls(policy, "Pendulum-v1", **{name: "1e-2"})
 
 
+def test_the_yaml_hint_is_given_for_a_string_that_reads_as_a_number_only() -> None:
+    for value in ("lin_0.02", "auto"):  # rl-zoo's schedule syntax, SAC's ent_coef: writing 1.0e-2 is no fix
+        with pytest.raises(TypeError) as info:
+            ARS("LinearPolicy", "Pendulum-v1", learning_rate=value)
+        assert str(info.value) == f"learning_rate={value!r}: it must be a number (a string)."
+
+
+@pytest.mark.parametrize("cls", [ARS, OpenES, REINFORCE])
+def test_numpy_numbers_are_numbers(cls: type) -> None:
+    # np.float32 is no Python float, which SB3's schedules take: it is converted, as np.int64 counts are
+    sizes = {ARS: dict(n_delta=np.int64(2)), OpenES: dict(population_size=np.int64(4))}.get(cls, {})
+    policy = "MlpPolicy" if cls is REINFORCE else "LinearPolicy"
+    model = cls(policy, "Pendulum-v1", learning_rate=np.float32(0.05), **sizes)
+    model.learn(1)
+    assert model.learning_rate == pytest.approx(0.05) and type(model.learning_rate) is float
+    if cls is not REINFORCE:
+        assert model.strategy.learning_rate == pytest.approx(0.05)
+
+
+def test_optimizer_names_are_checked_first() -> None:
+    # before the settings that depend on the optimizer, whose messages would otherwise read as nonsense
+    with pytest.raises(ValueError, match=r"^optimizer='ClipUp': choose one of 'adam', 'sgd', 'clipup' \(lower case\)"):
+        OpenES("LinearPolicy", "Pendulum-v1", optimizer="ClipUp", max_speed=0.2)
+    with pytest.raises(ValueError, match=r"^optimizer='Adam': choose one of"):
+        PGPE("LinearPolicy", "Pendulum-v1", optimizer="Adam")
+
+
+def test_cma_options_must_be_a_dict() -> None:
+    with pytest.raises(TypeError, match=r"cma_options='dict\(tolfun=1e-3\)': it must be a dict of pycma options"):
+        CMAES("LinearPolicy", "Pendulum-v1", cma_options="dict(tolfun=1e-3)")
+
+
+def test_a_noise_table_smaller_than_a_perturbation_is_refused_at_construction() -> None:
+    with pytest.raises(ValueError, match=r"^noise_table_size=3 is smaller than one perturbation \(4 parameters\)"):
+        ARS("LinearPolicy", "Pendulum-v1", noise_table_size=3, policy_kwargs=dict(with_bias=True))
+
+
 @pytest.mark.parametrize(
     ("cls", "kwargs"),
     [
@@ -189,6 +227,10 @@ def test_a_schedule_where_none_is_taken_is_named(cls: type, kwargs: dict[str, An
         (ARS, dict(policy_kwargs=dict(normalize_observations="False"))),
         (REINFORCE, dict(normalize_returns="false")),
         (REINFORCE, dict(use_baseline="false")),
+        (OpenES, dict(antithetic="False")),
+        (OpenES, dict(forget_best="False")),
+        *[(ARS, dict(policy_kwargs={name: "False"})) for name in ("with_bias", "squash_output")],
+        (REINFORCE, dict(policy_kwargs=dict(joint="false"))),
     ],
 )
 def test_a_flag_given_as_a_string_is_named(cls: type, kwargs: dict[str, Any]) -> None:
@@ -263,9 +305,28 @@ class NotFlatPolicy(BasePolicy):
         raise NotImplementedError
 
 
-def test_non_flat_policy_class() -> None:
-    with pytest.raises(TypeError, match="FlatPolicy"):
-        ARS(NotFlatPolicy, "Pendulum-v1")
+@pytest.mark.parametrize(
+    ("cls", "policy", "expected"),
+    [
+        (ARS, NotFlatPolicy, "FlatPolicy"),
+        (ARS, ActorCriticPolicy, "FlatPolicy"),  # it would fail building, asking for lr_schedule
+        (REINFORCE, sb3_es.MlpPolicy, "DiscretizedPolicy"),  # it would fail building, on use_baseline
+    ],
+)
+def test_a_policy_class_the_algorithm_cannot_train_is_named(cls: type, policy: type, expected: str) -> None:
+    with pytest.raises(TypeError, match=rf"^{cls.__name__} needs a {expected} subclass, got {policy.__name__}: pass"):
+        cls(policy, "Pendulum-v1")
+
+
+@pytest.mark.parametrize("policy_kwargs", [dict(n_bins=7), dict(joint=True)])
+def test_reinforce_refuses_discretizing_discrete_actions(policy_kwargs: dict[str, Any]) -> None:
+    with pytest.raises(ValueError, match=r"they discretize a Box action space, but Discrete\(2\) is used as it is"):
+        REINFORCE("MlpPolicy", "CartPole-v1", policy_kwargs=policy_kwargs)
+
+
+def test_reinforce_refuses_a_tuple_observation_space_at_construction() -> None:
+    with pytest.raises(ValueError, match=r"Unsupported observation space Tuple\(.*FlattenObservation"):
+        REINFORCE("MlpPolicy", gym.make("Blackjack-v1"))
 
 
 # ---------------------------------------------------------------------------- schedules during training

@@ -45,7 +45,9 @@ CASES: dict[type[BaseAlgorithm], Case] = {
         4 * 200,
         dict(optimizer="sgd"),
     ),
-    CMAES: Case(dict(population_size=4), dict(max_restarts=0, n_eval_episodes=2), 4 * 2 * 200, dict(sigma=0.5)),
+    CMAES: Case(
+        dict(population_size=4, restarts="ipop"), dict(max_restarts=0, n_eval_episodes=2), 4 * 2 * 200, dict(sigma=0.5)
+    ),
     PGPE: Case(
         dict(population_size=8),
         dict(population_size=4, stdev_learning_rate=0.05, max_speed=0.1, max_stdev=0.08, common_seeds=True),
@@ -203,3 +205,43 @@ def test_rl_zoos_constant_schedules_are_numbers(tmp_path: Path) -> None:
     openes.learn(1600)
     assert openes.learning_rate == 0.1 and openes._n_updates == 2
     assert openes.strategy.learning_rate == pytest.approx(0.1 * 0.5**2)
+
+
+#: ``(algorithm, its constructor arguments, a bad value for load())``: values checked by a strategy, by a flag
+#: check or with the types, which load() must refuse with the constructor's own message.
+REFUSED_LIKE_THE_CONSTRUCTOR = [
+    (ARS, dict(n_delta=2), dict(seed=-1)),
+    (ARS, dict(n_delta=2), dict(common_seeds="False")),
+    (ARS, dict(n_delta=2), dict(learning_rate="0.05")),
+    (OpenES, dict(population_size=4), dict(antithetic="False")),
+    (OpenES, dict(population_size=4), dict(sigma_limit=-1)),
+    (OpenES, dict(population_size=4), dict(weight_decay="0.01")),
+    (OpenES, dict(population_size=4), dict(learning_rate_decay=0.9, learning_rate_limit=1.0)),
+    (PGPE, dict(population_size=4), dict(stdev_max_change="0.1")),
+    (CMAES, dict(population_size=4), dict(max_restarts=3)),  # no restarts: it would do nothing
+    (REINFORCE, dict(n_episodes=2), dict(normalize_returns="False")),
+]
+
+
+@pytest.mark.parametrize(
+    ("cls", "kwargs", "bad"),
+    REFUSED_LIKE_THE_CONSTRUCTOR,
+    ids=[f"{cls.__name__}-{'-'.join(bad)}" for cls, _, bad in REFUSED_LIKE_THE_CONSTRUCTOR],
+)
+def test_load_refuses_what_the_constructor_refuses(
+    cls: type[BaseAlgorithm], kwargs: dict[str, Any], bad: dict[str, Any], tmp_path: Path
+) -> None:
+    cls("MlpPolicy", "Pendulum-v1", **kwargs).save(tmp_path / "model.zip")
+    with pytest.raises((TypeError, ValueError)) as from_constructor:
+        cls("MlpPolicy", "Pendulum-v1", **kwargs, **bad)
+    with pytest.raises(from_constructor.type) as from_load:
+        cls.load(tmp_path / "model.zip", **bad)
+    assert str(from_load.value) == str(from_constructor.value)
+    assert next(iter(bad)) in str(from_load.value)
+
+
+def test_numpy_numbers_given_to_load_are_numbers(tmp_path: Path) -> None:
+    path = saved(ARS, tmp_path)
+    model = ARS.load(path, env=make_vec_env("Pendulum-v1", n_envs=2, seed=1), learning_rate=np.float32(0.05))
+    model.learn(1, reset_num_timesteps=False)
+    assert type(model.learning_rate) is float and model.strategy.learning_rate == pytest.approx(0.05)

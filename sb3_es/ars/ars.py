@@ -100,7 +100,7 @@ class ARS(PopulationAlgorithm):
             delta_std=initial_value(self.delta_std),
             learning_rate=initial_value(self.learning_rate),
             seed=seed,
-            noise_table=make_noise_table(self.noise_table_size, seed),
+            noise_table=make_noise_table(self.noise_table_size, seed, center.size),
         )
 
     def learn(

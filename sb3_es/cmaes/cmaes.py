@@ -19,6 +19,16 @@ from sb3_es.strategies.cmaes import CMAESStrategy, Restarts
 #: Restarts allowed with ``restarts="ipop"`` or ``"bipop"`` unless ``max_restarts`` is given.
 DEFAULT_MAX_RESTARTS = 9
 
+
+def check_restarts_on(restarts: Restarts, max_restarts: int) -> None:
+    """:raises ValueError: For a ``max_restarts`` given without restarts, where it would do nothing."""
+    if restarts is None:
+        raise ValueError(
+            f"max_restarts={max_restarts} has no effect without restarts: pass restarts='ipop' or 'bipop', or "
+            "drop max_restarts."
+        )
+
+
 SelfCMAES = TypeVar("SelfCMAES", bound="CMAES")
 
 
@@ -82,14 +92,16 @@ class CMAES(PopulationAlgorithm):
         self.diagonal = diagonal
         self.restarts = restarts
         self.max_restarts = check_count("max_restarts", max_restarts, 0)
-        if restarts is None and self.max_restarts != DEFAULT_MAX_RESTARTS:
-            raise ValueError(
-                f"max_restarts={max_restarts} has no effect without restarts: pass restarts='ipop' or 'bipop', or "
-                "drop max_restarts."
-            )
+        if self.max_restarts != DEFAULT_MAX_RESTARTS:
+            check_restarts_on(restarts, max_restarts)
         self.cma_options = cma_options
         if _init_setup_model:
             self._setup_model()
+
+    def _apply_hyperparameters(self, changed: dict[str, Any]) -> None:
+        super()._apply_hyperparameters(changed)  # the strategy checks the count
+        if "max_restarts" in changed:
+            check_restarts_on(self.restarts, changed["max_restarts"])
 
     def _make_strategy(self, center: np.ndarray, seed: np.random.SeedSequence) -> CMAESStrategy:
         diagonal = len(center) > self.DIAGONAL_THRESHOLD if self.diagonal == "auto" else bool(self.diagonal)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import inspect
 import io
+import numbers
 import pathlib
 import warnings
 from typing import Any, ClassVar, TypeVar
@@ -19,7 +20,7 @@ from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, Schedule, TensorDict
 from stable_baselines3.common.utils import ConstantSchedule
 
-from sb3_es.common.checks import check_seed
+from sb3_es.common.checks import check_positive, check_seed
 from sb3_es.common.save_util import check_save_file
 from sb3_es.evaluation.time_limit import env_time_limit
 from sb3_es.strategies.base import check_count
@@ -33,13 +34,19 @@ SelfESBaseAlgorithm = TypeVar("SelfESBaseAlgorithm", bound="ESBaseAlgorithm")
 
 def constant_value(value: Any) -> Any:
     """
-    A ``ConstantSchedule`` as its number (rl-zoo wraps a number given for ``learning_rate`` or ``delta_std`` in one);
-    any other value unchanged. A number and a constant schedule differ where an algorithm decays a number (OpenES).
+    A ``ConstantSchedule`` as its number (rl-zoo wraps a number given for ``learning_rate`` or ``delta_std`` in one),
+    and a NumPy number as Python's; any other value unchanged. A number and a constant schedule differ where an
+    algorithm decays a number (OpenES).
 
     :param value: A hyperparameter value.
-    :return: The number of a constant schedule, or ``value``.
+    :return: The number of a constant schedule, a Python number, or ``value``.
     """
-    return value.val if isinstance(value, ConstantSchedule) else value
+    value = value.val if isinstance(value, ConstantSchedule) else value
+    if isinstance(value, numbers.Integral) and not isinstance(value, bool | int):
+        return int(value)  # NumPy's integers
+    if isinstance(value, numbers.Real) and not isinstance(value, numbers.Integral | float):
+        return float(value)  # np.float32, Fraction: SB3's schedules take Python numbers only
+    return value
 
 
 def _as_count(value: Any, annotation: Any) -> Any:
@@ -287,6 +294,10 @@ class ESBaseAlgorithm(BaseAlgorithm):
         steps = values.get("max_episode_steps")
         if steps is not None:
             check_count("max_episode_steps", steps)
+        if "seed" in values:
+            check_seed(values["seed"])
+        if values.get("learning_rate") is not None:
+            check_positive("learning_rate", values["learning_rate"])
 
     @classmethod
     def _parameters(cls) -> set[str]:

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import numbers
+from collections.abc import Iterable
+from typing import Any
 
 import numpy as np
 from stable_baselines3.common.type_aliases import Schedule
@@ -63,3 +65,20 @@ def check_seed(seed: int | None) -> None:
         return
     if isinstance(seed, bool) or not isinstance(seed, numbers.Integral) or not 0 <= seed < 2**32:
         raise ValueError(f"seed={seed!r}: it must be an integer in [0, 2**32 - 1], or None for a random seed.")
+
+
+def check_policy_class(algorithm: str, policy_class: Any, base: type, aliases: Iterable[str]) -> None:
+    """
+    Raise a clear error for a policy class the algorithm cannot train, before building it.
+
+    :param algorithm: The algorithm's name, for the message.
+    :param policy_class: The class given (or looked up from an alias).
+    :param base: The policy class it must derive from.
+    :param aliases: The algorithm's policy names.
+    """
+    if not (isinstance(policy_class, type) and issubclass(policy_class, base)):
+        name = getattr(policy_class, "__name__", repr(policy_class))
+        raise TypeError(
+            f"{algorithm} needs a {base.__name__} subclass, got {name}: pass one of its policy names "
+            f"({', '.join(map(repr, aliases))}) or a subclass of {base.__module__}.{base.__name__}."
+        )

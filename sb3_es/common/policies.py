@@ -84,6 +84,8 @@ class FlatPolicy(BasePolicy):
             )
         obs_dim = flat_obs_dim(observation_space)
         is_box = isinstance(action_space, spaces.Box)
+        with_bias = check_flag("with_bias", with_bias)
+        squash_output = check_flag("squash_output", squash_output)
         pi_arch, vf_arch = split_net_arch(net_arch)
         if vf_arch:
             raise ValueError(

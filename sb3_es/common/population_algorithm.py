@@ -77,8 +77,8 @@ class PopulationAlgorithm(StrategyAlgorithm):
         ``"processes"`` (worker processes of this machine, one per CPU, see
         :class:`~sb3_es.evaluation.processes.ProcessEvaluator`), ``"ray"`` (Ray actors, one per available CPU, see
         :class:`~sb3_es.evaluation.ray.RayEvaluator`) or a :class:`~sb3_es.evaluation.PopulationEvaluator`
-        instance. ``"processes"`` and ``"ray"`` build their workers' envs from ``env``, which must then be an env
-        id. Not saved with the model.
+        instance. ``"processes"`` and ``"ray"`` build their workers' envs from ``env``: an env id, or a VecEnv whose
+        envs ``gym.make`` made (their wrappers are rebuilt from the Gymnasium specs). Not saved with the model.
     :param noise_table_size: (ARS, OpenES and SimpleES, whose strategies draw Gaussian directions; not a parameter of
         this base class) Read the perturbations from a shared noise table of this many float32 values (e.g.
         ``2**24``) instead of drawing them fresh, so that a Ray evaluator sends an offset per candidate rather than a
@@ -146,6 +146,7 @@ class PopulationAlgorithm(StrategyAlgorithm):
     @classmethod
     def _check_live_values(cls, values: dict[str, Any]) -> None:
         check_count("n_eval_episodes", values.get("n_eval_episodes", 1))
+        check_flag("common_seeds", values.get("common_seeds", False))
         super()._check_live_values(values)
 
     @property

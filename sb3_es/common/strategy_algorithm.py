@@ -14,7 +14,7 @@ import torch as th
 from stable_baselines3.common.type_aliases import Schedule
 
 from sb3_es.common.base_class import ESBaseAlgorithm
-from sb3_es.common.checks import check_positive, check_scheduled_value
+from sb3_es.common.checks import check_policy_class, check_positive, check_scheduled_value
 from sb3_es.common.policies import FlatPolicy
 from sb3_es.strategies import Strategy
 from sb3_es.strategies.base import Population, check_count
@@ -37,17 +37,20 @@ def check_noise_table_size(size: int | None) -> int | None:
     return None if size is None else check_count("noise_table_size", size)
 
 
-def make_noise_table(size: int | None, seed: np.random.SeedSequence) -> SharedNoiseTable | None:
+def make_noise_table(size: int | None, seed: np.random.SeedSequence, num_params: int) -> SharedNoiseTable | None:
     """
     Build the shared noise table of a strategy, if one was asked for.
 
     :param size: Number of float32 values, or ``None`` for no table (directions drawn fresh).
     :param seed: Seed sequence of the strategy (the table's seed is derived from it).
+    :param num_params: Size of one perturbation: a clear error at construction for a table smaller than that.
     :return: The table, or ``None``.
     """
     if size is None:
         return None
-    return SharedNoiseTable(size, seed=int(seed.generate_state(1)[0]))
+    table = SharedNoiseTable(size, seed=int(seed.generate_state(1)[0]))
+    table.check_fits(num_params)
+    return table
 
 
 class StrategyAlgorithm(ESBaseAlgorithm):
@@ -76,9 +79,9 @@ class StrategyAlgorithm(ESBaseAlgorithm):
         if self.learning_rate is not None:
             self._setup_lr_schedule()  # SB3's lr_schedule attribute, as in SB3; _ask() applies the schedule
         self.set_random_seed(self.seed)
+        check_policy_class(self._algorithm_name, self.policy_class, FlatPolicy, self.policy_aliases)
         policy = self.policy_class(self.observation_space, self.action_space, **self.policy_kwargs)
-        if not isinstance(policy, FlatPolicy):
-            raise TypeError(f"{self._algorithm_name} needs a FlatPolicy subclass, got {type(policy).__name__}.")
+        assert isinstance(policy, FlatPolicy)  # checked above
         self.policy = policy.to(self.device)
         if self.strategy is None:  # a loaded model brings its strategy (and its random state)
             strategy_seed, env_seed = np.random.SeedSequence(self.seed).spawn(2)

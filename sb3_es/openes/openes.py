@@ -20,11 +20,16 @@ from sb3_es.common.population_algorithm import (
 )
 from sb3_es.evaluation import PopulationEvaluator
 from sb3_es.openes.policies import FlatPolicy
-from sb3_es.strategies.base import check_count, check_number
+from sb3_es.strategies.base import check_count, check_flag, check_number
 from sb3_es.strategies.openes import FitnessShaping, OpenESStrategy
 from sb3_es.strategies.optimizers import OptimizerName
 
 SelfOpenES = TypeVar("SelfOpenES", bound="OpenES")
+
+#: The hyperparameters that :func:`check_decays` checks together.
+DECAY_SETTINGS = frozenset(
+    {"sigma", "sigma_decay", "sigma_limit", "learning_rate", "learning_rate_decay", "learning_rate_limit"}
+)
 
 
 def check_decays(
@@ -149,22 +154,23 @@ class OpenES(PopulationAlgorithm):
         self.sigma_limit = sigma_limit
         self.learning_rate_decay = learning_rate_decay
         self.learning_rate_limit = learning_rate_limit
-        self.antithetic = antithetic
+        self.antithetic = check_flag("antithetic", antithetic)
         self.fitness_shaping: FitnessShaping = fitness_shaping
         self.optimizer = optimizer
         self.momentum = momentum
         self.max_speed = max_speed
         self.weight_decay = weight_decay
-        self.forget_best = forget_best
+        self.forget_best = check_flag("forget_best", forget_best)
         self.noise_table_size = check_noise_table_size(noise_table_size)
         if _init_setup_model:
             self._setup_model()
 
     def _apply_hyperparameters(self, changed: dict[str, Any]) -> None:
+        super()._apply_hyperparameters(changed)  # the strategy checks each value's type and range
         # Only when one of them changes: a save from before version 2 may hold a decay beside a schedule.
-        if changed.keys() & {"sigma", "sigma_decay", "learning_rate", "learning_rate_decay"}:
-            check_decays(self.sigma, self.sigma_decay, self.learning_rate, self.learning_rate_decay)
-        super()._apply_hyperparameters(changed)
+        if changed.keys() & DECAY_SETTINGS:
+            limits = (self.sigma_limit, self.learning_rate_limit)  # a decay must apply to the configured start
+            check_decays(self.sigma, self.sigma_decay, self.learning_rate, self.learning_rate_decay, limits)
 
     def _make_strategy(self, center: np.ndarray, seed: np.random.SeedSequence) -> OpenESStrategy:
         return OpenESStrategy(
@@ -184,7 +190,7 @@ class OpenES(PopulationAlgorithm):
             learning_rate_decay=self.learning_rate_decay,
             learning_rate_limit=self.learning_rate_limit,
             seed=seed,
-            noise_table=make_noise_table(self.noise_table_size, seed),
+            noise_table=make_noise_table(self.noise_table_size, seed, center.size),
         )
 
     def _upgrade_legacy_strategy(self) -> None:

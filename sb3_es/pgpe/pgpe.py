@@ -14,7 +14,7 @@ from sb3_es.evaluation import PopulationEvaluator
 from sb3_es.pgpe.policies import FlatPolicy
 from sb3_es.strategies.base import check_count, check_positive_number
 from sb3_es.strategies.fitness import FitnessShaping
-from sb3_es.strategies.optimizers import OptimizerName
+from sb3_es.strategies.optimizers import OptimizerName, check_optimizer_name
 from sb3_es.strategies.pgpe import PGPEStrategy
 
 SelfPGPE = TypeVar("SelfPGPE", bound="PGPE")
@@ -22,8 +22,10 @@ SelfPGPE = TypeVar("SelfPGPE", bound="PGPE")
 
 def check_step_sizes(optimizer: str, max_speed: float | None, center_learning_rate: float | None) -> None:
     """
-    :raises ValueError: For a step size that is not positive, or one that ``optimizer`` does not use.
+    :raises ValueError: For an unknown optimizer, a step size that is not positive, or one that ``optimizer`` does
+        not use.
     """
+    check_optimizer_name(optimizer)
     for name, value in (("max_speed", max_speed), ("center_learning_rate", center_learning_rate)):
         if value is not None:
             check_positive_number(name, value)

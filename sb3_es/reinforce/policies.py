@@ -36,8 +36,10 @@ from sb3_es.common.arguments import base_arguments
 from sb3_es.common.net_arch import layer_sizes, split_net_arch
 from sb3_es.evaluation.network import flat_obs_dim
 from sb3_es.reinforce.legacy import upgrade_legacy_state_dict
-from sb3_es.strategies.base import check_count
+from sb3_es.strategies.base import check_count, check_flag
 
+#: Levels per ``Box`` action dimension when ``n_bins`` is not given (the seed document's 3).
+DEFAULT_N_BINS = 3
 #: Default limit on the number of joint actions (``n_bins ** action_dim``).
 MAX_JOINT_ACTIONS = 100_000
 
@@ -80,7 +82,7 @@ class DiscretizedPolicy(ActorCriticPolicy):
     :param action_space: ``Box`` with finite bounds (discretized) or ``Discrete``.
     :param lr_schedule: Learning rate schedule; the optimizer starts with ``lr_schedule(1)``.
     :param n_bins: Number of evenly spaced levels per ``Box`` dimension, ``low`` and ``high`` included
-        (ignored for ``Discrete`` actions).
+        (``None``: 3). ``Discrete`` actions are used as they are: give neither ``n_bins`` nor ``joint``.
     :param joint: ``True``: one categorical over the ``n_bins ** action_dim`` combinations of levels;
         ``False``: an independent categorical per dimension.
     :param max_joint_actions: Largest number of joint actions accepted when ``joint=True``.
@@ -112,7 +114,7 @@ class DiscretizedPolicy(ActorCriticPolicy):
         observation_space: spaces.Space,
         action_space: spaces.Space,
         lr_schedule: Schedule,
-        n_bins: int = 3,
+        n_bins: int | None = None,
         joint: bool = False,
         max_joint_actions: int = MAX_JOINT_ACTIONS,
         net_arch: list[int] | dict[str, list[int]] | None = None,
@@ -127,7 +129,14 @@ class DiscretizedPolicy(ActorCriticPolicy):
         optimizer_kwargs: dict[str, Any] | None = None,
     ) -> None:
         check_action_space(action_space)
-        check_count("n_bins", n_bins, minimum=2)
+        flat_obs_dim(observation_space)  # a clear error for an observation space the network cannot take
+        joint = check_flag("joint", joint)
+        if isinstance(action_space, spaces.Discrete) and (n_bins is not None or joint):
+            raise ValueError(
+                f"n_bins={n_bins!r}, joint={joint!r}: they discretize a Box action space, but {action_space} is "
+                "used as it is. Leave n_bins and joint out of policy_kwargs."
+            )
+        n_bins = DEFAULT_N_BINS if n_bins is None else check_count("n_bins", n_bins, minimum=2)
         pi_arch, vf_arch = split_net_arch(net_arch)
         if vf_arch is not None and value_net_arch is not None:
             raise ValueError(
@@ -142,10 +151,10 @@ class DiscretizedPolicy(ActorCriticPolicy):
         self.policy_net_arch = [64, 64] if pi_arch is None else pi_arch
         self.value_net_arch = vf_arch if value_net_arch is None else layer_sizes(value_net_arch, "value_net_arch")
         # Set before ActorCriticPolicy.__init__, which calls _build.
-        self.n_bins = int(n_bins)
-        self.joint = bool(joint)
+        self.n_bins = n_bins
+        self.joint = joint
         self.max_joint_actions = check_count("max_joint_actions", max_joint_actions)
-        self.use_baseline = bool(use_baseline)
+        self.use_baseline = check_flag("use_baseline", use_baseline)
         self.index_space = self._make_index_space(action_space)
         if features_extractor_class is None:
             dict_obs = isinstance(observation_space, spaces.Dict)

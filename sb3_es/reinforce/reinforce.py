@@ -21,7 +21,7 @@ from torch.nn import functional as F
 
 from sb3_es.common.arguments import base_arguments
 from sb3_es.common.base_class import ESBaseAlgorithm
-from sb3_es.common.checks import check_positive, check_scheduled_value
+from sb3_es.common.checks import check_policy_class, check_scheduled_value
 from sb3_es.evaluation.time_limit import end_capped_episodes
 from sb3_es.reinforce.episodes import EpisodeBatch, EpisodeCollector, check_rewards
 from sb3_es.reinforce.legacy import upgrade_legacy_optimizer_state
@@ -57,9 +57,10 @@ class REINFORCE(ESBaseAlgorithm):
     Each update starts with ``env.seed(s)`` and ``env.reset()``, and samples its actions from a torch
     generator seeded with ``s'``, where ``s, s'`` come from a random generator stored in the model
     (seeded by ``seed``) and saved with it. Training is therefore reproducible for a fixed ``seed``
-    (with ``DummyVecEnv``), and ``learn(n)``, ``save``, ``load``, ``learn(n, reset_num_timesteps=False)``
-    ends with the same parameters as ``learn(2 * n)``. Episodes cut by a time limit are treated like
-    terminated ones (no bootstrapping), as in the original algorithm.
+    (with ``DummyVecEnv``), and ``learn(n)``, ``save``, ``load``, then
+    ``learn(total - model.num_timesteps, reset_num_timesteps=False)`` ends with the same parameters as
+    ``learn(total)`` (updates end at episode boundaries, so ask the second call for what is left). Episodes
+    cut by a time limit are treated like terminated ones (no bootstrapping), as in the original algorithm.
 
     :param policy: ``"MlpPolicy"``, ``"MultiInputPolicy"`` or a :class:`DiscretizedPolicy` class.
     :param env: Environment, env id or VecEnv (its slots collect episodes in parallel).
@@ -104,6 +105,7 @@ class REINFORCE(ESBaseAlgorithm):
     @classmethod
     def _check_live_values(cls, values: dict[str, Any]) -> None:
         check_count("n_episodes", values.get("n_episodes", 1))
+        check_flag("normalize_returns", values.get("normalize_returns", True))
         if not 0.0 <= check_number("gamma", values.get("gamma", 0.0)) <= 1.0:
             raise ValueError(f"gamma={values['gamma']}: the discount factor must be in [0, 1].")
         max_grad_norm = values.get("max_grad_norm")
@@ -111,8 +113,6 @@ class REINFORCE(ESBaseAlgorithm):
             raise ValueError(f"max_grad_norm={max_grad_norm}: it must be a positive number or None.")
         if not np.isfinite(check_number("ent_coef", values.get("ent_coef", 0.0))):
             raise ValueError(f"ent_coef={values['ent_coef']}: it must be a finite number.")
-        if "learning_rate" in values:
-            check_positive("learning_rate", values["learning_rate"])
         super()._check_live_values(values)
 
     def __init__(
@@ -172,16 +172,14 @@ class REINFORCE(ESBaseAlgorithm):
     def _setup_model(self) -> None:
         self._setup_lr_schedule()
         self.set_random_seed(self.seed)
-        policy = self.policy_class(  # type: ignore[assignment]
+        check_policy_class("REINFORCE", self.policy_class, DiscretizedPolicy, self.policy_aliases)
+        self.policy = self.policy_class(  # type: ignore[assignment]
             self.observation_space,
             self.action_space,
             self.lr_schedule,
             use_baseline=self.use_baseline,
             **self.policy_kwargs,
-        )
-        if not isinstance(policy, DiscretizedPolicy):
-            raise TypeError(f"REINFORCE needs a DiscretizedPolicy subclass, got {type(policy).__name__}.")
-        self.policy = policy.to(self.device)
+        ).to(self.device)
         if self._rng is None:  # a loaded model brings its own generator (and its state)
             self._rng = np.random.default_rng(self.seed)
 

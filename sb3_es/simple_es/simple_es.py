@@ -89,7 +89,7 @@ class SimpleES(PopulationAlgorithm):
             n_elite=self.n_elite,
             weights=self.weights,
             seed=seed,
-            noise_table=make_noise_table(self.noise_table_size, seed),
+            noise_table=make_noise_table(self.noise_table_size, seed, center.size),
         )
 
     def learn(

@@ -183,11 +183,22 @@ def check_number(name: str, value: Any) -> float:
     if isinstance(value, numbers.Real) and not isinstance(value, bool):
         return float(value)
     hint = ""
-    if isinstance(value, str):
+    if isinstance(value, str) and _parses_as_number(value):
         hint = " (a string; a YAML file reads a number without a dot, such as 1e-2, as one: write 1.0e-2)"
+    elif isinstance(value, str):
+        hint = " (a string)"
     elif callable(value):
         hint = f" ({name} takes no schedule)"
     raise TypeError(f"{name}={value!r}: it must be a number{hint}.")
+
+
+def _parses_as_number(text: str) -> bool:
+    """:return: Whether ``float(text)`` reads ``text`` (``"1e-2"``, not ``"lin_0.02"`` or ``"auto"``)."""
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
 
 
 def check_flag(name: str, value: Any) -> bool:

@@ -6,7 +6,7 @@ import contextlib
 import math
 import os
 import warnings
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from types import ModuleType
 from typing import TYPE_CHECKING, Any, Literal
 
@@ -112,6 +112,11 @@ class CMAESStrategy(Strategy):
         self.restarts = restarts
         self.max_restarts = max_restarts
         self.check_settings()
+        if not isinstance(cma_options, Mapping | None):
+            raise TypeError(
+                f"cma_options={cma_options!r}: it must be a dict of pycma options, such as dict(tolfun=1e-3) (in a "
+                "YAML file, a mapping: cma_options: {tolfun: 1.0e-3})."
+            )
         self.cma_options = dict(cma_options or {})
         for key in ("popsize", "seed", "CMA_diagonal", "randn"):
             if key in self.cma_options:

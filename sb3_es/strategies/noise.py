@@ -47,6 +47,24 @@ class SharedNoiseTable:
         """
         return self.noise[offset : offset + dim]
 
+    def check_fits(self, dim: int, n: int = 1) -> None:
+        """
+        :param dim: Length of each slice (the number of parameters).
+        :param n: Number of distinct slices needed (the perturbations of a generation).
+        :raises ValueError: Naming ``noise_table_size`` and the fix when the table holds fewer than ``n`` slices.
+        """
+        if dim > self.size:
+            raise ValueError(
+                f"noise_table_size={self.size} is smaller than one perturbation ({dim} parameters): raise it well "
+                f"above {dim} (tables of millions of values are usual), or pass None to draw every perturbation afresh."
+            )
+        if self.size - dim + 1 < n:  # fewer slices than perturbations: some candidates would share a direction
+            raise ValueError(
+                f"The noise table ({self.size} values) holds {self.size - dim + 1} distinct perturbations of {dim} "
+                f"parameters, fewer than the {n} of a generation: raise noise_table_size well above {dim + n - 1} "
+                "(tables of millions of values are usual), or pass None to draw every perturbation afresh."
+            )
+
     def sample_offsets(self, rng: np.random.Generator, dim: int, n: int) -> np.ndarray:
         """
         :param rng: Random generator (the strategy's, so runs stay reproducible).
@@ -54,14 +72,7 @@ class SharedNoiseTable:
         :param n: Number of offsets.
         :return: ``n`` offsets such that every slice fits in the table.
         """
-        if dim > self.size:
-            raise ValueError(f"The noise table ({self.size} values) is smaller than one perturbation ({dim}).")
-        if self.size - dim + 1 < n:  # fewer slices than perturbations: some candidates would share a direction
-            raise ValueError(
-                f"The noise table ({self.size} values) holds {self.size - dim + 1} distinct perturbations of {dim} "
-                f"parameters, fewer than the {n} of a generation: raise noise_table_size well above {dim + n - 1} "
-                "(tables of millions of values are usual), or pass None to draw every perturbation afresh."
-            )
+        self.check_fits(dim, n)
         return rng.integers(0, self.size - dim + 1, size=n)
 
     def __getstate__(self) -> dict[str, int]:

@@ -6,7 +6,14 @@ from typing import Any
 
 import numpy as np
 
-from sb3_es.strategies.base import Population, check_count, check_positive_number, mirrored_groups
+from sb3_es.strategies.base import (
+    Population,
+    check_count,
+    check_flag,
+    check_number,
+    check_positive_number,
+    mirrored_groups,
+)
 from sb3_es.strategies.fitness import FitnessShaping, centered_ranks, shape_fitness
 from sb3_es.strategies.noise import NoiseTablePopulation, SharedNoiseTable
 from sb3_es.strategies.optimizers import GradientStrategy, OptimizerName
@@ -93,16 +100,23 @@ class OpenESStrategy(GradientStrategy):
 
     def check_settings(self) -> None:
         population_size = self.population_size = check_count("population_size", self.population_size, 2)
+        self.antithetic = check_flag("antithetic", self.antithetic)
+        self.forget_best = check_flag("forget_best", self.forget_best)
         if self.antithetic and population_size % 2:
             raise ValueError(
                 f"population_size={population_size}: it must be at least 2, and even with antithetic sampling."
             )
         for name, value in (("sigma", self.sigma), ("learning_rate", self.learning_rate)):
             check_positive_number(name, value)
-        if self.weight_decay < 0:
-            raise ValueError(f"weight_decay={self.weight_decay}: it must be >= 0.")
+        for name, value in (
+            ("weight_decay", self.weight_decay),
+            ("sigma_limit", self.sigma_limit),
+            ("learning_rate_limit", self.learning_rate_limit),
+        ):
+            if not (np.isfinite(check_number(name, value)) and value >= 0):
+                raise ValueError(f"{name}={value}: it must be a finite number >= 0.")
         for name, rate in (("sigma_decay", self.sigma_decay), ("learning_rate_decay", self.learning_rate_decay)):
-            if not 0 < rate <= 1:
+            if not 0 < check_number(name, rate) <= 1:
                 raise ValueError(f"{name}={rate}: it must be in (0, 1].")
         shape_fitness(np.zeros(2), self.fitness_shaping)  # validates the name
 

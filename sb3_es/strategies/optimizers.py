@@ -21,6 +21,12 @@ OptimizerName = Literal["adam", "sgd", "clipup"]
 OPTIMIZERS: tuple[OptimizerName, ...] = ("adam", "sgd", "clipup")
 
 
+def check_optimizer_name(name: Any) -> None:
+    """:raises ValueError: For a name that is not one of :data:`OPTIMIZERS` (lower case)."""
+    if name not in OPTIMIZERS:
+        raise ValueError(f"optimizer={name!r}: choose one of {', '.join(map(repr, OPTIMIZERS))} (lower case).")
+
+
 class ClipUp(th.optim.Optimizer):
     """
     ClipUp (Toklu et al., 2020): ``v <- momentum * v + lr * g / ||g||``, then ``v`` is scaled down to norm
@@ -94,6 +100,7 @@ def make_optimizer(
     :param max_speed: ClipUp's largest step (``None``: ``2 * learning_rate``); only for ClipUp.
     :return: The optimizer.
     """
+    check_optimizer_name(name)
     # checked whichever optimizer, as a value that is not used is still a mistake
     if not 0 <= check_number("momentum", momentum) < 1:
         raise ValueError(f"momentum={momentum}: the SGD and ClipUp momentum must be in [0, 1).")
@@ -103,9 +110,7 @@ def make_optimizer(
         return th.optim.Adam(params, lr=learning_rate, betas=betas)
     if name == "sgd":
         return th.optim.SGD(params, lr=learning_rate, momentum=momentum)
-    if name == "clipup":
-        return ClipUp(params, lr=learning_rate, max_speed=max_speed, momentum=momentum)
-    raise ValueError(f"optimizer={name!r}: choose one of {', '.join(map(repr, OPTIMIZERS))}.")
+    return ClipUp(params, lr=learning_rate, max_speed=max_speed, momentum=momentum)
 
 
 class GradientStrategy(Strategy):

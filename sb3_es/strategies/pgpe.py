@@ -78,9 +78,9 @@ class PGPEStrategy(GradientStrategy):
         population_size = self.population_size = check_count("population_size", self.population_size, 2)
         if population_size % 2:
             raise ValueError(f"population_size={population_size}: it must be even (symmetric pairs) and at least 2.")
-        if not self.stdev_learning_rate >= 0:
+        if not check_number("stdev_learning_rate", self.stdev_learning_rate) >= 0:
             raise ValueError(f"stdev_learning_rate={self.stdev_learning_rate}: it must be >= 0 (0 keeps stdev fixed).")
-        if not 0 < self.stdev_max_change < 1:
+        if not 0 < check_number("stdev_max_change", self.stdev_max_change) < 1:
             raise ValueError(
                 f"stdev_max_change={self.stdev_max_change}: it must be in (0, 1) (a relative change; 0.2 in the "
                 "ClipUp paper), so that every standard deviation stays positive."
