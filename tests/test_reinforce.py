@@ -288,3 +288,15 @@ def test_nan_reward_refused_naming_step_and_episode(use_baseline: bool) -> None:
     # The first update was applied, the second refused: the weights are finite, those of one update.
     assert model._n_updates == 1
     assert_identical(policy_state(model), policy_state(reference))
+
+
+@pytest.mark.parametrize("env_id", ["CartPole-v1", "Pendulum-v1"])
+def test_a_policy_saved_alone_loads_and_acts_the_same(env_id: str, tmp_path: Path) -> None:
+    # SB3's policy.save() / Policy.load() rebuild the policy from its constructor parameters (Discrete actions: the
+    # default n_bins, which the policy accepts there)
+    model = REINFORCE("MlpPolicy", env_id, n_episodes=2, seed=0)
+    model.learn(400)
+    model.policy.save(tmp_path / "policy.zip")
+    loaded = DiscretizedPolicy.load(tmp_path / "policy.zip")
+    obs = np.stack([model.observation_space.sample() for _ in range(8)])
+    np.testing.assert_array_equal(loaded.predict(obs, deterministic=True)[0], model.predict(obs, deterministic=True)[0])

@@ -82,7 +82,7 @@ class DiscretizedPolicy(ActorCriticPolicy):
     :param action_space: ``Box`` with finite bounds (discretized) or ``Discrete``.
     :param lr_schedule: Learning rate schedule; the optimizer starts with ``lr_schedule(1)``.
     :param n_bins: Number of evenly spaced levels per ``Box`` dimension, ``low`` and ``high`` included
-        (``None``: 3). ``Discrete`` actions are used as they are: give neither ``n_bins`` nor ``joint``.
+        (``None``: 3). ``Discrete`` actions are used as they are: another ``n_bins``, or ``joint=True``, is refused.
     :param joint: ``True``: one categorical over the ``n_bins ** action_dim`` combinations of levels;
         ``False``: an independent categorical per dimension.
     :param max_joint_actions: Largest number of joint actions accepted when ``joint=True``.
@@ -131,7 +131,8 @@ class DiscretizedPolicy(ActorCriticPolicy):
         check_action_space(action_space)
         flat_obs_dim(observation_space)  # a clear error for an observation space the network cannot take
         joint = check_flag("joint", joint)
-        if isinstance(action_space, spaces.Discrete) and (n_bins is not None or joint):
+        # n_bins=3 (the default) is what a saved policy's constructor parameters hold for Discrete actions
+        if isinstance(action_space, spaces.Discrete) and (n_bins not in (None, DEFAULT_N_BINS) or joint):
             raise ValueError(
                 f"n_bins={n_bins!r}, joint={joint!r}: they discretize a Box action space, but {action_space} is "
                 "used as it is. Leave n_bins and joint out of policy_kwargs."
