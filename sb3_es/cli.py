@@ -119,7 +119,8 @@ def main(argv: Sequence[str] | None = None) -> None:
             parser.error(f"-n {options.n_timesteps}: give a positive number of env steps.")
         quickstart(options.n_timesteps, options.log_folder, options.seed)
         return
-    check_former_flags(args[1:])
+    if args[:1] == ["train"]:  # the former command's flags (enjoy and the others take --n-envs, as in rl-zoo)
+        check_former_flags(args[1:])
     try:
         from sb3_es.zoo.commands import main as zoo_main
     except ImportError as e:

@@ -38,7 +38,8 @@ def test_commands_forward_to_the_zoo(tmp_path: Path, monkeypatch: pytest.MonkeyP
     )
     model = REINFORCE.load(tmp_path / "logs" / "reinforce" / "CartPole-v1_1" / "CartPole-v1.zip")
     assert model.n_episodes == 4 and model.num_timesteps >= 1000 and model.get_env() is None
-    main(["enjoy", "--algo", "reinforce", "--env", "CartPole-v1", "--no-render", "-n", "50"])
+    # rl-zoo's enjoy has --n-envs, which the former train flags' check must leave to it
+    main(["enjoy", "--algo", "reinforce", "--env", "CartPole-v1", "--no-render", "-n", "50", "--n-envs", "2"])
 
 
 @pytest.mark.parametrize(

@@ -168,7 +168,7 @@ def test_a_number_given_as_a_string_is_named(cls: type, name: str) -> None:
 
 
 def test_the_yaml_hint_is_given_for_a_string_that_reads_as_a_number_only() -> None:
-    for value in ("lin_0.02", "auto"):  # rl-zoo's schedule syntax, SAC's ent_coef: writing 1.0e-2 is no fix
+    for value in ("auto", "exp_0.02"):  # SAC's ent_coef, a schedule rl-zoo does not have: 1.0e-2 is no fix
         with pytest.raises(TypeError) as info:
             ARS("LinearPolicy", "Pendulum-v1", learning_rate=value)
         assert str(info.value) == f"learning_rate={value!r}: it must be a number (a string)."
@@ -192,6 +192,16 @@ def test_optimizer_names_are_checked_first() -> None:
         OpenES("LinearPolicy", "Pendulum-v1", optimizer="ClipUp", max_speed=0.2)
     with pytest.raises(ValueError, match=r"^optimizer='Adam': choose one of"):
         PGPE("LinearPolicy", "Pendulum-v1", optimizer="Adam")
+
+
+@pytest.mark.parametrize(
+    ("cls", "kwargs"),
+    [(OpenES, dict(momentum=0.5)), (PGPE, dict(optimizer="adam", center_learning_rate=0.01, momentum=0.5))],
+)
+def test_momentum_with_adam_is_refused(cls: type, kwargs: dict[str, Any]) -> None:
+    # as max_speed is: a setting the chosen optimizer does not use
+    with pytest.raises(ValueError, match=r"^momentum=0.5 is an SGD and ClipUp setting; it has no effect with"):
+        cls("LinearPolicy", "Pendulum-v1", **kwargs)
 
 
 def test_cma_options_must_be_a_dict() -> None:

@@ -10,7 +10,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import torch as th
-from algorithms import ALGORITHMS, POPULATION_ALGORITHMS, Algo
+from algorithms import ALGORITHMS, ALGOS, POPULATION_ALGORITHMS, Algo
 from envs import NEVER_ENDING_ID, DiscreteMatchEnv, NaNObsWrapper, NeverEndingEnv, SuccessInfoWrapper, ToyEnv
 from gymnasium import spaces
 from gymnasium.wrappers import TimeLimit
@@ -22,11 +22,12 @@ from stable_baselines3.common.evaluation import evaluate_policy
 from stable_baselines3.common.logger import configure
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.preprocessing import preprocess_obs
-from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
+from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNormalize
 
 from sb3_es.common.base_class import DEFAULT_MAX_EPISODE_STEPS
 from sb3_es.common.policies import MlpPolicy
 from sb3_es.evaluation import ObsStats
+from sb3_es.evaluation.time_limit import env_time_limit
 
 
 def make_model(algo: Algo, env: Any, **kwargs: Any) -> BaseAlgorithm:
@@ -110,6 +111,24 @@ def test_env_time_limit_is_used_without_warning(algo: Algo) -> None:
     lengths = EpisodeLengths()
     model.learn(1, callback=lengths)
     assert set(lengths.lengths) == {30}
+
+
+@pytest.mark.timeout(60)
+def test_the_time_limit_of_subprocess_envs_is_found_under_rl_zoo() -> None:
+    # rl_zoo3 replaces gymnasium's TimeLimit with a subclass in this process; the workers of a SubprocVecEnv do not
+    # import rl_zoo3, so their TimeLimit is gymnasium's own, which a class check from here does not recognize
+    import rl_zoo3.gym_patches  # noqa: F401
+
+    env = make_vec_env("Pendulum-v1", n_envs=2, vec_env_cls=SubprocVecEnv)
+    try:
+        assert env_time_limit(env) == 200
+        model = make_model(ALGOS[0], env)
+        with warnings.catch_warnings():
+            warnings.filterwarnings("error", message=".*time limit")
+            assert model.episode_step_limit() == 200  # type: ignore[attr-defined]
+    finally:
+        env.close()
+    assert env_time_limit(make_vec_env(NeverEndingEnv, n_envs=2)) is None
 
 
 @pytest.mark.timeout(60)

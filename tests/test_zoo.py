@@ -711,3 +711,23 @@ def test_docs_walk_through_the_workflow() -> None:
     # which curve to hold against PPO
     assert "`rollout/ep_rew_mean` averages the perturbed candidates" in guide
     assert "`eval/mean_reward`" in guide
+
+
+#: ``(algorithm, hyperparameter)``: every value that takes a schedule (rl-zoo converts ``lin_X`` for
+#: ``learning_rate`` and ``delta_std`` itself, and hands ``sigma`` on as the string).
+SCHEDULED = [
+    ("ars_es", "learning_rate"),
+    ("ars_es", "delta_std"),
+    ("openes", "learning_rate"),
+    ("openes", "sigma"),
+    ("simple_es", "sigma"),
+    ("reinforce", "learning_rate"),
+]
+
+
+@pytest.mark.parametrize(("algo", "name"), SCHEDULED, ids=[f"{algo}-{name}" for algo, name in SCHEDULED])
+def test_lin_strings_are_linear_schedules(algo: str, name: str) -> None:
+    policy = "MlpPolicy" if algo == "reinforce" else "LinearPolicy"
+    model = ALGOS[algo](policy, "Pendulum-v1", **{name: "lin_0.1"})
+    schedule = getattr(model, name)
+    assert callable(schedule) and schedule(1.0) == pytest.approx(0.1) and schedule(0.25) == pytest.approx(0.025)

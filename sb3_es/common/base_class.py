@@ -18,7 +18,7 @@ from stable_baselines3.common.env_util import is_wrapped
 from stable_baselines3.common.on_policy_algorithm import OnPolicyAlgorithm
 from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, Schedule, TensorDict
-from stable_baselines3.common.utils import ConstantSchedule
+from stable_baselines3.common.utils import ConstantSchedule, LinearSchedule
 
 from sb3_es.common.checks import check_positive, check_seed
 from sb3_es.common.save_util import check_save_file
@@ -35,13 +35,19 @@ SelfESBaseAlgorithm = TypeVar("SelfESBaseAlgorithm", bound="ESBaseAlgorithm")
 def constant_value(value: Any) -> Any:
     """
     A ``ConstantSchedule`` as its number (rl-zoo wraps a number given for ``learning_rate`` or ``delta_std`` in one),
-    and a NumPy number as Python's; any other value unchanged. A number and a constant schedule differ where an
-    algorithm decays a number (OpenES).
+    rl-zoo's ``"lin_X"`` as a linear schedule from ``X`` to 0 (rl-zoo converts it for ``learning_rate`` and
+    ``delta_std`` only, not ``sigma``), and a NumPy number as Python's; any other value unchanged. A number and a
+    constant schedule differ where an algorithm decays a number (OpenES).
 
     :param value: A hyperparameter value.
-    :return: The number of a constant schedule, a Python number, or ``value``.
+    :return: The number of a constant schedule, a schedule, a Python number, or ``value``.
     """
     value = value.val if isinstance(value, ConstantSchedule) else value
+    if isinstance(value, str) and value.startswith("lin_"):  # rl-zoo's linear schedule, for the keys it leaves alone
+        try:
+            return LinearSchedule(float(value[len("lin_") :]), 0.0, 1.0)  # start * progress_remaining
+        except ValueError:
+            return value
     if isinstance(value, numbers.Integral) and not isinstance(value, bool | int):
         return int(value)  # NumPy's integers
     if isinstance(value, numbers.Real) and not isinstance(value, numbers.Integral | float):

@@ -127,8 +127,8 @@ class PopulationAlgorithm(StrategyAlgorithm):
         self._env_id = env if isinstance(env, str) else None
         super().__init__(**base_arguments(super().__init__, locals()))
         self._check_live_values({"n_eval_episodes": n_eval_episodes})
-        if learning_rate is not None:
-            check_positive("learning_rate", learning_rate)
+        if self.learning_rate is not None:  # as ESBaseAlgorithm keeps it (a constant schedule's number, ...)
+            check_positive("learning_rate", self.learning_rate)
         self.n_eval_episodes = int(n_eval_episodes)
         self.common_seeds = check_flag("common_seeds", common_seeds)
         shaping = RewardShaping.create(reward_clip, terminal_reward, alive_bonus_offset)

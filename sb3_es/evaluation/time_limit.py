@@ -5,7 +5,6 @@ from __future__ import annotations
 import time
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 from stable_baselines3.common.env_util import unwrap_wrapper
 from stable_baselines3.common.monitor import Monitor
@@ -21,20 +20,11 @@ def env_time_limit(env: VecEnv) -> int | None:
     :param env: The VecEnv.
     :return: The largest ``max_episode_steps`` over the env slots, or ``None`` if a slot has no ``TimeLimit``.
     """
-    # Looked up at call time: rl_zoo3 replaces gymnasium's TimeLimit with a subclass, and a SubprocVecEnv pickles the
-    # class by name, which fails for a class imported before the replacement.
-    time_limit = gym.wrappers.TimeLimit
+    # Asked by attribute (the one TimeLimit keeps its limit in), not by class: rl_zoo3 replaces gymnasium's TimeLimit
+    # with a subclass in the processes that import it, so the envs of a SubprocVecEnv's workers, which do not, are
+    # not instances of the class seen here, and the class may not even pickle.
     try:
-        wrapped = env.env_is_wrapped(time_limit)
-    except Exception:  # e.g. a SubprocVecEnv that cannot pickle the class (a re-imported gymnasium): ask the specs
-        try:
-            limits = [getattr(spec, "max_episode_steps", None) for spec in env.get_attr("spec")]
-        except Exception:  # a VecEnv that cannot tell
-            return None
-        known = [int(limit) for limit in limits if limit is not None]
-        return max(known) if known and len(known) == len(limits) else None
-    try:
-        if not all(wrapped):
+        if not env.has_attr("_max_episode_steps"):
             return None
         return max(int(limit) for limit in env.get_attr("_max_episode_steps"))
     except (AttributeError, NotImplementedError, TypeError, ValueError):  # a VecEnv that cannot tell

@@ -141,7 +141,7 @@ class OpenES(PopulationAlgorithm):
         _init_setup_model: bool = True,
     ) -> None:
         # rl-zoo passes a number from a hyperparameter file as a constant schedule: a number, which the decay applies to
-        learning_rate = constant_value(learning_rate)
+        learning_rate, sigma = constant_value(learning_rate), constant_value(sigma)
         check_positive("sigma", sigma)
         for name, limit in (("sigma_limit", sigma_limit), ("learning_rate_limit", learning_rate_limit)):
             check_non_negative(name, limit)

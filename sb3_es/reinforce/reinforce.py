@@ -20,7 +20,7 @@ from stable_baselines3.common.vec_env import VecEnv
 from torch.nn import functional as F
 
 from sb3_es.common.arguments import base_arguments
-from sb3_es.common.base_class import ESBaseAlgorithm
+from sb3_es.common.base_class import ESBaseAlgorithm, constant_value
 from sb3_es.common.checks import check_policy_class, check_scheduled_value
 from sb3_es.evaluation.time_limit import end_capped_episodes
 from sb3_es.reinforce.episodes import EpisodeBatch, EpisodeCollector, check_rewards
@@ -135,6 +135,7 @@ class REINFORCE(ESBaseAlgorithm):
         max_episode_steps: int | None = None,
         _init_setup_model: bool = True,
     ) -> None:
+        learning_rate = constant_value(learning_rate)  # rl-zoo's constant schedule or "lin_X", a NumPy number
         self._check_live_values(
             dict(
                 n_episodes=n_episodes,

@@ -10,6 +10,7 @@ import torch as th
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
 
 from sb3_es.common.arguments import base_arguments
+from sb3_es.common.base_class import constant_value
 from sb3_es.common.population_algorithm import (
     PopulationAlgorithm,
     check_noise_table_size,
@@ -71,6 +72,7 @@ class SimpleES(PopulationAlgorithm):
         max_episode_steps: int | None = None,
         _init_setup_model: bool = True,
     ) -> None:
+        sigma = constant_value(sigma)  # rl-zoo's "lin_X" string, or a constant schedule
         check_positive("sigma", sigma)
         super().__init__(**base_arguments(super().__init__, locals()))
         self.population_size = check_count("population_size", population_size, 2)

@@ -19,6 +19,8 @@ from sb3_es.strategies.base import Strategy, check_number, check_positive_number
 OptimizerName = Literal["adam", "sgd", "clipup"]
 #: The optimizer names, for validation messages.
 OPTIMIZERS: tuple[OptimizerName, ...] = ("adam", "sgd", "clipup")
+#: SGD's and ClipUp's momentum when none is given.
+DEFAULT_MOMENTUM = 0.9
 
 
 def check_optimizer_name(name: Any) -> None:
@@ -106,6 +108,11 @@ def make_optimizer(
         raise ValueError(f"momentum={momentum}: the SGD and ClipUp momentum must be in [0, 1).")
     if max_speed is not None and name != "clipup":
         raise ValueError(f"max_speed={max_speed} is a ClipUp setting; it has no effect with optimizer={name!r}.")
+    if name == "adam" and momentum != DEFAULT_MOMENTUM:
+        raise ValueError(
+            f"momentum={momentum} is an SGD and ClipUp setting; it has no effect with optimizer='adam' (Adam's "
+            "moments follow betas). Leave momentum out, or choose optimizer='sgd' or 'clipup'."
+        )
     if name == "adam":
         return th.optim.Adam(params, lr=learning_rate, betas=betas)
     if name == "sgd":
