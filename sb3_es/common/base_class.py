@@ -23,7 +23,7 @@ from stable_baselines3.common.utils import ConstantSchedule, LinearSchedule
 from sb3_es.common.checks import check_positive, check_seed
 from sb3_es.common.save_util import check_save_file
 from sb3_es.evaluation.time_limit import env_time_limit
-from sb3_es.strategies.base import check_count
+from sb3_es.strategies.base import check_count, parse_number
 
 #: Episode length cap for an env without a time limit, when ``max_episode_steps`` is not given (the length of
 #: MuJoCo's and dm_control's episodes).
@@ -43,11 +43,9 @@ def constant_value(value: Any) -> Any:
     :return: The number of a constant schedule, a schedule, a Python number, or ``value``.
     """
     value = value.val if isinstance(value, ConstantSchedule) else value
-    if isinstance(value, str) and value.startswith("lin_"):  # rl-zoo's linear schedule, for the keys it leaves alone
-        try:
-            return LinearSchedule(float(value[len("lin_") :]), 0.0, 1.0)  # start * progress_remaining
-        except ValueError:
-            return value
+    start = parse_number(value[len("lin_") :]) if isinstance(value, str) and value.startswith("lin_") else None
+    if start is not None:  # rl-zoo's linear schedule, for the keys it leaves alone
+        return LinearSchedule(start, 0.0, 1.0)  # start * progress_remaining
     if isinstance(value, numbers.Integral) and not isinstance(value, bool | int):
         return int(value)  # NumPy's integers
     if isinstance(value, numbers.Real) and not isinstance(value, numbers.Integral | float):

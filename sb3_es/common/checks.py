@@ -44,17 +44,6 @@ def check_scheduled_value(name: str, value: float, progress_remaining: float, al
         )
 
 
-def check_non_negative(name: str, value: float) -> None:
-    """
-    Raise a clear error for a negative or non-finite hyperparameter (a count: ``strategies.base.check_count``).
-
-    :param name: Hyperparameter name, for the message.
-    :param value: Its value.
-    """
-    if not (np.isfinite(check_number(name, value)) and value >= 0):
-        raise ValueError(f"{name}={value!r}: it must be a finite number >= 0.")
-
-
 def check_seed(seed: int | None) -> None:
     """
     Raise a clear error for a seed that NumPy and torch would refuse deep inside ``set_random_seed``.

@@ -10,7 +10,6 @@ from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedul
 
 from sb3_es.common.arguments import base_arguments
 from sb3_es.common.base_class import constant_value
-from sb3_es.common.checks import check_non_negative
 from sb3_es.common.population_algorithm import (
     PopulationAlgorithm,
     check_noise_table_size,
@@ -20,7 +19,7 @@ from sb3_es.common.population_algorithm import (
 )
 from sb3_es.evaluation import PopulationEvaluator
 from sb3_es.openes.policies import FlatPolicy
-from sb3_es.strategies.base import check_count, check_flag, check_number
+from sb3_es.strategies.base import check_count, check_flag, check_non_negative, check_number
 from sb3_es.strategies.openes import FitnessShaping, OpenESStrategy
 from sb3_es.strategies.optimizers import OptimizerName
 
@@ -47,6 +46,8 @@ def check_decays(
     """
     pairs = (("sigma", sigma, sigma_decay), ("learning_rate", learning_rate, learning_rate_decay))
     for (name, value, rate), limit in zip(pairs, limits or (None, None), strict=True):
+        if limit is not None:
+            check_non_negative(f"{name}_limit", limit)
         if not 0 < check_number(f"{name}_decay", rate) <= 1:
             raise ValueError(f"{name}_decay={rate}: it must be in (0, 1].")
         if limit is not None and rate != 1 and not callable(value) and value <= limit:  # estool: only above it
@@ -143,9 +144,6 @@ class OpenES(PopulationAlgorithm):
         # rl-zoo passes a number from a hyperparameter file as a constant schedule: a number, which the decay applies to
         learning_rate, sigma = constant_value(learning_rate), constant_value(sigma)
         check_positive("sigma", sigma)
-        for name, limit in (("sigma_limit", sigma_limit), ("learning_rate_limit", learning_rate_limit)):
-            check_non_negative(name, limit)
-        check_non_negative("weight_decay", weight_decay)
         check_decays(sigma, sigma_decay, learning_rate, learning_rate_decay, (sigma_limit, learning_rate_limit))
         super().__init__(**base_arguments(super().__init__, locals()))
         self.population_size = check_count("population_size", population_size, 2)

@@ -183,7 +183,7 @@ def check_number(name: str, value: Any) -> float:
     if isinstance(value, numbers.Real) and not isinstance(value, bool):
         return float(value)
     hint = ""
-    if isinstance(value, str) and _parses_as_number(value):
+    if isinstance(value, str) and parse_number(value) is not None:
         hint = " (a string; a YAML file reads a number without a dot, such as 1e-2, as one: write 1.0e-2)"
     elif isinstance(value, str):
         hint = " (a string)"
@@ -192,13 +192,12 @@ def check_number(name: str, value: Any) -> float:
     raise TypeError(f"{name}={value!r}: it must be a number{hint}.")
 
 
-def _parses_as_number(text: str) -> bool:
-    """:return: Whether ``float(text)`` reads ``text`` (``"1e-2"``, not ``"lin_0.02"`` or ``"auto"``)."""
+def parse_number(text: str) -> float | None:
+    """:return: The number ``float`` reads in ``text`` (``"1e-2"``), or None (``"lin_0.02"``, ``"auto"``)."""
     try:
-        float(text)
+        return float(text)
     except ValueError:
-        return False
-    return True
+        return None
 
 
 def check_flag(name: str, value: Any) -> bool:
@@ -212,10 +211,26 @@ def check_flag(name: str, value: Any) -> bool:
     raise TypeError(f"{name}={value!r}: it must be True or False.")
 
 
-def check_positive_number(name: str, value: Any) -> None:
-    """:raises ValueError: Naming ``name`` when ``value`` is not a finite number above 0 (TypeError: no number)."""
-    if not (np.isfinite(check_number(name, value)) and value > 0):
+def check_positive_number(name: str, value: Any) -> float:
+    """
+    :return: ``value`` as a float.
+    :raises ValueError: Naming ``name`` when ``value`` is not a finite number above 0 (TypeError: no number).
+    """
+    number = check_number(name, value)
+    if not (np.isfinite(number) and number > 0):
         raise ValueError(f"{name}={value}: it must be a positive number.")
+    return number
+
+
+def check_non_negative(name: str, value: Any) -> float:
+    """
+    :return: ``value`` as a float.
+    :raises ValueError: Naming ``name`` when ``value`` is negative or not finite (TypeError: no number).
+    """
+    number = check_number(name, value)
+    if not (np.isfinite(number) and number >= 0):
+        raise ValueError(f"{name}={value!r}: it must be a finite number >= 0.")
+    return number
 
 
 def candidate(population: Population, index: int) -> np.ndarray:

@@ -10,6 +10,7 @@ from sb3_es.strategies.base import (
     Population,
     check_count,
     check_flag,
+    check_non_negative,
     check_number,
     check_positive_number,
     mirrored_groups,
@@ -113,8 +114,7 @@ class OpenESStrategy(GradientStrategy):
             ("sigma_limit", self.sigma_limit),
             ("learning_rate_limit", self.learning_rate_limit),
         ):
-            if not (np.isfinite(check_number(name, value)) and value >= 0):
-                raise ValueError(f"{name}={value}: it must be a finite number >= 0.")
+            check_non_negative(name, value)
         for name, rate in (("sigma_decay", self.sigma_decay), ("learning_rate_decay", self.learning_rate_decay)):
             if not 0 < check_number(name, rate) <= 1:
                 raise ValueError(f"{name}={rate}: it must be in (0, 1].")

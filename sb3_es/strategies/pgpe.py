@@ -65,10 +65,10 @@ class PGPEStrategy(GradientStrategy):
         self.population_size = population_size
         check_positive_number("stdev_init", stdev_init)
         self.stdev = np.full(self.num_params, float(stdev_init))
-        self.stdev_learning_rate = check_number("stdev_learning_rate", stdev_learning_rate)
-        self.stdev_max_change = check_number("stdev_max_change", stdev_max_change)
+        self.stdev_learning_rate = stdev_learning_rate
+        self.stdev_max_change = stdev_max_change
         self.fitness_shaping = fitness_shaping
-        self.max_stdev = None if max_stdev is None else check_number("max_stdev", max_stdev)
+        self.max_stdev = max_stdev
         self.check_settings()
         if self.max_stdev is not None and self.max_stdev < stdev_init:
             raise ValueError(f"stdev_init={stdev_init} is above max_stdev={max_stdev}: lower it, or raise max_stdev.")
@@ -78,15 +78,17 @@ class PGPEStrategy(GradientStrategy):
         population_size = self.population_size = check_count("population_size", self.population_size, 2)
         if population_size % 2:
             raise ValueError(f"population_size={population_size}: it must be even (symmetric pairs) and at least 2.")
-        if not check_number("stdev_learning_rate", self.stdev_learning_rate) >= 0:
+        self.stdev_learning_rate = check_number("stdev_learning_rate", self.stdev_learning_rate)
+        if not self.stdev_learning_rate >= 0:
             raise ValueError(f"stdev_learning_rate={self.stdev_learning_rate}: it must be >= 0 (0 keeps stdev fixed).")
-        if not 0 < check_number("stdev_max_change", self.stdev_max_change) < 1:
+        self.stdev_max_change = check_number("stdev_max_change", self.stdev_max_change)
+        if not 0 < self.stdev_max_change < 1:
             raise ValueError(
                 f"stdev_max_change={self.stdev_max_change}: it must be in (0, 1) (a relative change; 0.2 in the "
                 "ClipUp paper), so that every standard deviation stays positive."
             )
         if self.max_stdev is not None:
-            check_positive_number("max_stdev", self.max_stdev)
+            self.max_stdev = check_positive_number("max_stdev", self.max_stdev)
         shape_fitness(np.zeros(2), self.fitness_shaping)  # validates the name
 
     @property
