@@ -895,7 +895,13 @@ def main(argv: list[str] | None = None) -> Path:
     parser.add_argument("--eval-episodes", type=int, default=5)
     parser.add_argument("--out", default="results/compare", help="output folder")
     parser.add_argument("--band", choices=["minmax", "std"], default="minmax", help="band over seeds in the plots")
-    parser.add_argument("--threshold", nargs="*", default=[], help="ENV_ID=RETURN for the time-to-threshold column")
+    parser.add_argument(
+        "--threshold",
+        nargs="+",
+        action="extend",
+        default=[],
+        help="ENV_ID=RETURN for the time-to-threshold column (repeatable)",
+    )
     parser.add_argument(
         "--stop-at-threshold", action="store_true", help="end a run once an evaluation reaches its --threshold"
     )
@@ -938,7 +944,11 @@ def main(argv: list[str] | None = None) -> Path:
     )
     parser.add_argument("--verbose", type=int, default=0, help="model verbosity (0: progress line only)")
     parser.add_argument(
-        "--override", nargs="*", default=[], help="ALGO:KEY=VALUE hyperparameter overrides, e.g. ppo:n_steps=256"
+        "--override",
+        nargs="+",
+        action="extend",
+        default=[],
+        help="ALGO:KEY=VALUE hyperparameter overrides, e.g. ppo:n_steps=256 (repeatable)",
     )
     args = parser.parse_args(argv)
     out = Path(args.out)

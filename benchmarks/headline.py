@@ -69,7 +69,9 @@ def main() -> None:
     parser.add_argument("--steps", nargs="+", type=float, default=[1e6], help="budgets at which to evaluate")
     parser.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
     parser.add_argument("--episodes", type=int, default=10)
-    parser.add_argument("--set", nargs="*", default=[], help="KEY=VALUE constructor arguments (values read as YAML)")
+    parser.add_argument(
+        "--set", nargs="+", action="extend", default=[], help="KEY=VALUE constructor arguments, as YAML (repeatable)"
+    )
     parser.add_argument("--out", default="results/headline")
     args = parser.parse_args()
     torch.set_num_threads(1)

@@ -296,7 +296,9 @@ def main(argv: list[str] | None = None) -> str:
     parser.add_argument(
         "--eval-freq", type=int, default=None, help="env steps between evaluations (default: chosen per env)"
     )
-    parser.add_argument("--threshold", nargs="*", default=[], help="ENV_ID=RETURN, replacing the defaults")
+    parser.add_argument(
+        "--threshold", nargs="+", action="extend", default=[], help="ENV_ID=RETURN, replacing the defaults (repeatable)"
+    )
     parser.add_argument("--out", default="results/verify", help="output folder (one compare.py folder per entry)")
     parser.add_argument("--tag", default="", help="suffix of the entries' output folders (a re-run after a fix)")
     parser.add_argument("--table-only", action="store_true", help="only print the table from existing runs")

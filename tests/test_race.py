@@ -118,6 +118,9 @@ def test_a_run_continues_from_its_last_model(tmp_path: Any) -> None:
         (["--steps", "100", "--threshold", "CartPol-v1=400"], r"--threshold for \['CartPol-v1'\], which --envs"),
         (["--steps", "100", "--stop-at-threshold"], r"--stop-at-threshold stops at a --threshold"),
         (["--steps", "100", "--override", "ppo:n_steps=64"], r"--override for \['ppo'\], which --algos"),
+        # a repeated flag adds to the first, which argparse's default would silently drop
+        (["--steps", "100", "--override", "ppo:n_steps=64", "--override", "ars_es:n_delta=2"], r"\['ppo'\], which"),
+        (["--steps", "100", "--threshold", "CartPol-v1=4", "--threshold", "CartPole-v1=4"], r"\['CartPol-v1'\], which"),
         (["--steps", "100", "--override", "ars_es:n_timesteps=100"], r"n_timesteps with --steps"),
         (["--steps", "100", "--algos", "ars_es", "ppo_typo"], r"--algos \['ppo_typo'\]: unknown"),
         (
@@ -139,6 +142,10 @@ def test_compare_refuses_what_it_would_ignore(extra: list[str], message: str, tm
         (["--envs", "CartPole-v1", "Pendulm-v1"], r"No entry for \['Pendulm-v1'\]"),
         (["--envs", "CartPole-v1", "--max-steps", "0"], r"--max-steps 0: it must be positive"),
         (["--envs", "CartPole-v1", "--threshold", "Pendulm-v1=-100"], r"--threshold for \['Pendulm-v1'\]"),
+        (
+            ["--envs", "CartPole-v1", "--threshold", "Pendulm-v1=-1", "--threshold", "CartPole-v1=4"],
+            r"\['Pendulm-v1'\]",
+        ),
         (["--envs", "CartPole-v1", "--seeds", "0", "0"], r"--seeds repeats \[0\]"),
         (["--envs", "CartPole-v1", "--algos", "ars_ess"], r"--algos \['ars_ess'\]: not sb3-es algorithms"),
     ],
