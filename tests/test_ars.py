@@ -5,7 +5,6 @@ What every algorithm does (learning, step accounting, callbacks, logging) is in 
 
 from __future__ import annotations
 
-import inspect
 from pathlib import Path
 
 import numpy as np
@@ -29,11 +28,6 @@ def test_logged_train_values(tmp_path: Path) -> None:
     assert float(row["train/learning_rate"]) == pytest.approx(0.02)
     assert float(row["train/delta_std"]) == pytest.approx(0.05)
     assert float(row["train/return_std"]) > 0 and float(row["train/step_size"]) > 0
-
-
-def test_tensorboard_run_name_is_not_sb3_contribs() -> None:
-    """Runs are named ``ARS_ES_<n>``, not sb3-contrib's ``ARS_<n>`` (runs of both can share a log folder)."""
-    assert inspect.signature(ARS.learn).parameters["tb_log_name"].default == "ARS_ES"
 
 
 # ---------------------------------------------------------------------------- hyperparameters

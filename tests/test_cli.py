@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import pytest
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
 from sb3_es import ARS, REINFORCE
 from sb3_es.cli import main
+from sb3_es.zoo.registry import UsageError
 
 
 def test_quickstart_writes_logs_and_model(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -28,7 +30,9 @@ def test_quickstart_former_option_names(tmp_path: Path) -> None:
     assert ARS.load(tmp_path / "ars_es_Swimmer-v5.zip").num_timesteps >= 2000
 
 
-def test_commands_forward_to_the_zoo(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_commands_forward_to_the_zoo(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
     monkeypatch.chdir(tmp_path)
     main(
         [
@@ -39,7 +43,18 @@ def test_commands_forward_to_the_zoo(tmp_path: Path, monkeypatch: pytest.MonkeyP
     model = REINFORCE.load(tmp_path / "logs" / "reinforce" / "CartPole-v1_1" / "CartPole-v1.zip")
     assert model.n_episodes == 4 and model.num_timesteps >= 1000 and model.get_env() is None
     # rl-zoo's enjoy has --n-envs, which the former train flags' check must leave to it
+    observations: list[tuple[int, ...]] = []
+    predict = REINFORCE.predict
+
+    def spy(self: REINFORCE, observation: Any, *args: Any, **kwargs: Any) -> Any:
+        observations.append(observation.shape)
+        return predict(self, observation, *args, **kwargs)
+
+    monkeypatch.setattr(REINFORCE, "predict", spy)
+    capsys.readouterr()
     main(["enjoy", "--algo", "reinforce", "--env", "CartPole-v1", "--no-render", "-n", "50", "--n-envs", "2"])
+    assert f"Loading {Path('logs', 'reinforce', 'CartPole-v1_1', 'CartPole-v1.zip')}" in capsys.readouterr().out
+    assert observations == [(2, 4)] * 50  # the trained model acted 50 steps on 2 envs
 
 
 @pytest.mark.parametrize(
@@ -75,5 +90,5 @@ def test_abbreviated_and_attached_options_are_read_as_rl_zoo_reads_them() -> Non
     args = prepare_args("train", ["--alg", "ars_es", "--env", "CartPole-v1"])
     assert args[-2] == "--conf-file" and args[-1].endswith("ars_es.yml")  # the packaged file, as with --algo
     assert prepare_args("enjoy", ["--algo", "ars_es", "--env", "CartPole-v1", "-f/tmp/logs"])[-1] == "-f/tmp/logs"
-    with pytest.raises(Exception, match="--algo ars is sb3-contrib's ARS"):
+    with pytest.raises(UsageError, match="--algo ars is sb3-contrib's ARS"):
         prepare_args("train", ["--alg", "ars", "--env", "CartPole-v1"])

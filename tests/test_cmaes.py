@@ -315,8 +315,10 @@ def test_strategy_alone_is_reproducible() -> None:
 
 
 # ---------------------------------------------------------------------------- errors
-def test_no_learning_rate() -> None:
+def test_no_learning_rate(tmp_path: Path) -> None:
     """CMA-ES adapts its own step size: the model has no learning rate (no dummy value) and logs none."""
     model = pendulum_model()
     assert model.learning_rate is None
     assert not hasattr(model.strategy, "learning_rate")
+    (row,) = learn_logged(model, PENDULUM_GENERATION, tmp_path)
+    assert "train/sigma" in row and "train/learning_rate" not in row

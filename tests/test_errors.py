@@ -15,7 +15,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import torch as th
-from algorithms import ALGORITHMS, POPULATION_ALGORITHMS, Algo
+from algorithms import ALGORITHMS, ALGOS, POPULATION_ALGORITHMS, Algo
 from envs import MultiDiscreteActionEnv
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.policies import ActorCriticPolicy, BasePolicy
@@ -49,7 +49,11 @@ BAD_HYPERPARAMETERS = [
     ],
     *each(ARS, "delta_std", [0.0, -0.05, NAN, INF, lambda progress: -progress]),
     *each(ARS, "learning_rate", [0.0, -0.02, NAN, INF, lambda progress: 0.0]),
-    *each(ARS, "n_eval_episodes", [0, -2, 1.5, NAN, "2"]),
+    *[  # checked by the population methods' shared base
+        param
+        for cls in (algo.cls for algo in ALGOS if algo.population)
+        for param in each(cls, "n_eval_episodes", [0, -2, 1.5, NAN, "2"], r"n_eval_episodes=(0|-2|1.5|nan|'2'): ")
+    ],
     *[
         param
         for cls in (ARS, OpenES, CMAES, PGPE, SimpleES, REINFORCE)
@@ -174,16 +178,59 @@ def test_the_yaml_hint_is_given_for_a_string_that_reads_as_a_number_only() -> No
         assert str(info.value) == f"learning_rate={value!r}: it must be a number (a string)."
 
 
-@pytest.mark.parametrize("cls", [ARS, OpenES, REINFORCE])
-def test_numpy_numbers_are_numbers(cls: type) -> None:
-    # np.float32 is no Python float, which SB3's schedules take: it is converted, as np.int64 counts are
-    sizes = {ARS: dict(n_delta=np.int64(2)), OpenES: dict(population_size=np.int64(4))}.get(cls, {})
-    policy = "MlpPolicy" if cls is REINFORCE else "LinearPolicy"
-    model = cls(policy, "Pendulum-v1", learning_rate=np.float32(0.05), **sizes)
+#: Every algorithm's number-valued hyperparameters, with values its constructor takes together (with
+#: :data:`OPTIONS`, the other arguments those values need); the population methods' shared ones are in
+#: :data:`SHARED_FLOATS`.
+FLOATS: dict[type, dict[str, float]] = {
+    ARS: dict(learning_rate=0.05, delta_std=0.04),
+    OpenES: dict(
+        sigma=0.2,
+        learning_rate=0.05,
+        sigma_decay=0.99,
+        sigma_limit=0.02,
+        learning_rate_decay=0.99,
+        learning_rate_limit=0.002,
+        momentum=0.5,
+        max_speed=0.3,
+        weight_decay=0.01,
+    ),
+    CMAES: dict(sigma=0.3),
+    PGPE: dict(
+        stdev_init=0.2,
+        max_speed=0.3,
+        center_learning_rate=0.1,
+        stdev_learning_rate=0.2,
+        stdev_max_change=0.3,
+        max_stdev=0.5,
+        momentum=0.8,
+    ),
+    SimpleES: dict(sigma=0.2),
+    REINFORCE: dict(learning_rate=0.05, gamma=0.9, ent_coef=0.01, max_grad_norm=0.5),
+}
+SHARED_FLOATS = dict(alive_bonus_offset=-1.0, terminal_reward=0.5)
+OPTIONS: dict[type, dict[str, Any]] = {OpenES: dict(optimizer="clipup")}
+
+
+@pytest.mark.parametrize("algo", ALGORITHMS)
+def test_numpy_numbers_are_numbers(algo: Algo, tmp_path: Path) -> None:
+    """
+    np.float32 is no Python float, which SB3's schedules take: the model converts it, as np.int64 counts, and keeps
+    and saves Python numbers.
+    """
+    floats = {**FLOATS[algo.cls], **(SHARED_FLOATS if algo.population else {})}
+    counts = {**algo.size(4), **(dict(n_eval_episodes=1) if algo.population else {})}
+    numpy_values = {key: np.float32(value) for key, value in floats.items()}
+    numpy_values |= {key: np.int64(value) for key, value in counts.items()}
+    model = algo.make("Pendulum-v1", 4, **numpy_values, **OPTIONS.get(algo.cls, {}))
     model.learn(1)
-    assert model.learning_rate == pytest.approx(0.05) and type(model.learning_rate) is float
-    if cls is not REINFORCE:
-        assert model.strategy.learning_rate == pytest.approx(0.05)
+    model.save(tmp_path / "model.zip")
+    for when, m in (("constructed", model), ("loaded", algo.cls.load(tmp_path / "model.zip"))):
+        for key, value in floats.items():
+            assert type(getattr(m, key)) is float and getattr(m, key) == pytest.approx(value), f"{when} {key}"
+            if algo.population and hasattr(m.strategy, key):
+                assert type(getattr(m.strategy, key)) is float, f"{when} strategy.{key}"
+        for key, value in counts.items():
+            assert type(getattr(m, key)) is int and getattr(m, key) == value, f"{when} {key}"
 
 
 def test_optimizer_names_are_checked_first() -> None:
@@ -258,17 +305,19 @@ def test_max_episode_steps_above_the_envs_own_limit(algo: Algo) -> None:
         model.learn(1)
 
 
-@pytest.mark.parametrize("algo", POPULATION_ALGORITHMS)
+@pytest.mark.parametrize("algo", ALGORITHMS)
 def test_whole_number_floats_are_counts(algo: Algo) -> None:
     # A YAML file or rl-zoo's -params can give a count as 4.0: it is used as the integer 4.
-    sizes = {key: float(value) for key, value in algo.size(4).items()}
-    model = algo.make("Pendulum-v1", 4, **sizes, n_eval_episodes=1.0)
+    counts = {key: float(value) for key, value in algo.size(4).items()}
+    if algo.population:
+        counts["n_eval_episodes"] = 1.0
+    model = algo.make("Pendulum-v1", 4, **counts)
     model.learn(1)
-    for key, value in sizes.items():
-        assert type(getattr(model, key)) is int and getattr(model, key) == value
-        if hasattr(model.strategy, key):
-            assert type(getattr(model.strategy, key)) is int
-    assert model.num_timesteps == model.strategy.population_size * 200
+    for key, value in counts.items():
+        assert type(getattr(model, key)) is int and getattr(model, key) == value, key
+        if algo.population and hasattr(model.strategy, key):
+            assert type(getattr(model.strategy, key)) is int, key
+    assert model.num_timesteps == 4 * 200  # 4 candidates (episodes) of 200 steps
 
 
 @pytest.mark.parametrize(("cls", "kwargs", "match"), BAD_HYPERPARAMETERS)
@@ -435,7 +484,10 @@ def test_load_with_custom_objects_does_not_warn(tmp_path: Path, algo: Algo) -> N
     original = algo.make("Pendulum-v1", 2)
     original.save(tmp_path / "model.zip")
     garbled = garble_action_space(tmp_path / "model.zip")
-    with pytest.warns(UserWarning, match="Could not deserialize object action_space"), pytest.raises(KeyError):
+    with (
+        pytest.warns(UserWarning, match="Could not deserialize object action_space"),
+        pytest.raises(KeyError, match="observation_space and action_space were not given"),
+    ):
         algo.cls.load(garbled)  # SB3 needs the action space
     with warnings.catch_warnings():
         warnings.filterwarnings("error", message="Could not deserialize")

@@ -225,4 +225,5 @@ def test_vec_normalize_wrapper(norm_reward: bool) -> None:
     np.testing.assert_allclose(sorted(result.returns.ravel()), monitor_returns, rtol=1e-4, atol=1e-3)
     # The policy sees the normalized observations (VecNormalize statistics were updated while stepping).
     assert env.obs_rms.count > 400
-    assert np.all(np.abs(result.obs_stats.mean) < 5.0)
+    # Raw Pendulum observations have an angular-velocity variance of about 34, normalized ones about 1.
+    assert np.all(result.obs_stats.var < 3.0)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import inspect
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -103,8 +104,11 @@ def test_values_that_cannot_change_are_refused(cls: type[BaseAlgorithm], tmp_pat
     ((key, value),) = CASES[cls].refused.items()
     with pytest.raises(ValueError, match=rf"{cls.__name__}.load\({key}=.*cannot change {key} once it has trained"):
         cls.load(path, **{key: value})
-    model = cls.load(path, **{key: getattr(cls.load(path), key)})  # the saved value itself is fine
-    assert type(model) is cls
+    # The saved value (given to the constructor, or its default) itself is fine, and kept.
+    saved_value = CASES[cls].kwargs.get(key, inspect.signature(cls).parameters[key].default)
+    assert saved_value != value
+    model = cls.load(path, **{key: saved_value})
+    assert type(model) is cls and getattr(model, key) == saved_value
 
 
 @pytest.mark.parametrize("cls", list(CASES), ids=lambda cls: cls.__name__)

@@ -60,6 +60,7 @@ def test_evaluator_processes_from_env_id() -> None:
     assert evaluator.env == "Pendulum-v1" and evaluator.num_workers == usable_cpus()
     assert model._n_updates == 1 and model.num_timesteps >= 4 * 200
     pids = [process.pid for process in evaluator._workers]
+    assert len(pids) == usable_cpus()
     del model, evaluator
     gc.collect()  # an evaluator no longer used stops its workers
     assert wait_gone(pids)
@@ -242,6 +243,7 @@ def test_set_env_rebuilds_the_workers_from_the_new_env(monkeypatch: pytest.Monke
     old = model._evaluator
     assert isinstance(old, ProcessEvaluator) and old.env == "Pendulum-v1"
     pids = [process.pid for process in old._workers]
+    assert len(pids) == 2
     model.set_env(make_vec_env("Pendulum-v1", env_kwargs={"g": 2.0}))
     assert wait_gone(pids)  # the old workers are stopped at once
     try:
@@ -269,6 +271,7 @@ def test_models_in_a_loop() -> None:
         assert model._n_updates == 1
         pids += [process.pid for process in model._evaluator._workers]  # type: ignore[union-attr]
         model._evaluator.close()  # type: ignore[union-attr]
+    assert len(pids) == 3 * usable_cpus()
     assert wait_gone(pids)
 
 
@@ -336,6 +339,7 @@ def test_normal_exit_leaves_no_process() -> None:
     out, err = script.communicate(timeout=600)
     assert script.returncode == 0, err
     pids = [int(pid) for pid in out.splitlines()[0].split()]
+    assert len(pids) == 2
     assert out.splitlines()[-1] == "done"
     assert wait_gone(pids)
 

@@ -173,6 +173,12 @@ def value_layers(model: REINFORCE) -> list[int]:
     return [m.out_features for m in modules if isinstance(m, th.nn.Linear)]
 
 
+def value_parameters(model: REINFORCE) -> list[np.ndarray]:
+    """:return: Copies of the value network's parameters (hidden layers, then the value head)."""
+    modules = [model.policy.mlp_extractor.value_net, model.policy.value_net]
+    return [p.detach().cpu().numpy().copy() for module in modules for p in module.parameters()]
+
+
 @pytest.mark.parametrize(
     "policy_kwargs, expected",
     [
@@ -187,19 +193,27 @@ def test_baseline_layers_from_net_arch(policy_kwargs: dict[str, Any], expected: 
     model = REINFORCE("MlpPolicy", BoxActionEnv(), use_baseline=True, policy_kwargs=policy_kwargs, seed=0)
     assert value_layers(model) == expected
     assert model.policy.policy_net_arch == [8]
-    # A2C's actor-critic form trains the baseline as A2C trains its critic.
+    # A2C's actor-critic form trains the baseline as A2C trains its critic: every value parameter moves.
+    before = value_parameters(model)
     model.learn(20)
     assert model._n_updates >= 1
+    after = value_parameters(model)
+    assert len(after) == 2 * len(expected)  # a weight and a bias per layer
+    assert all(not np.array_equal(a, b) for a, b in zip(before, after))
 
 
-def test_dict_observation_from_dm_control() -> None:
+def test_dict_observations_with_a_baseline_and_discretized_actions() -> None:
+    """
+    What the generic check (``test_algorithms.py``, dm_control's walker-walk) leaves to REINFORCE: the baseline
+    trains on Dict observations, actions are the bins' levels, and the alias "MlpPolicy" takes Dict observations.
+    """
     import shimmy  # noqa: F401  (registers the dm_control/ envs)
 
     env = gym.make("dm_control/walker-walk-v0", max_episode_steps=50)
-    assert isinstance(env.observation_space, spaces.Dict)
     model = REINFORCE("MultiInputPolicy", env, n_episodes=2, use_baseline=True, seed=0)
-    model.learn(200)
-    assert model.num_timesteps == 200
+    before = value_parameters(model)
+    model.learn(100)
+    assert all(not np.array_equal(a, b) for a, b in zip(before, value_parameters(model)))
     obs, _ = env.reset(seed=0)
     action, _ = model.predict(obs, deterministic=True)
     assert action.shape == (6,)

@@ -248,7 +248,7 @@ def test_load_truncated_zip(saved: Saved, tmp_path: Path) -> None:
 
 @pytest.mark.parametrize("algo", ALGORITHMS)
 def test_load_missing_file(algo: Algo, tmp_path: Path) -> None:
-    with pytest.raises(FileNotFoundError):
+    with pytest.raises(FileNotFoundError, match="No such file or directory"):
         algo.cls.load(tmp_path / "nothing_here.zip")
 
 
@@ -362,7 +362,9 @@ def test_files_saved_before_strategy_state_version_2_load_and_continue(name: str
     assert data is not None and data["strategy"].restored_legacy_state
     model = algo.load(LEGACY_DIR / f"{name}.zip", env=pendulum_env())
     assert not model.strategy.restored_legacy_state  # upgraded on load
-    assert model.strategy.best_fitness == -np.inf or np.isfinite(model.strategy.best_fitness)
+    # The best fitness of the saved generation; ARS's file predates its tracking: the default, -inf.
+    expected_best = {"ars": -np.inf, "openes": -1762.4432843625546, "cmaes": -1775.149192839861}[name]
+    assert model.strategy.best_fitness == expected_best
     if name == "openes":
         assert model.strategy.sigma == pytest.approx(0.08)
         assert model.strategy.learning_rate == pytest.approx(0.045)

@@ -11,6 +11,7 @@ from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback
 
 from sb3_es.cmaes.policies import FlatPolicy
 from sb3_es.common.arguments import base_arguments
+from sb3_es.common.base_class import python_number
 from sb3_es.common.population_algorithm import PopulationAlgorithm
 from sb3_es.evaluation import PopulationEvaluator
 from sb3_es.strategies.base import check_count, check_positive_number
@@ -87,7 +88,7 @@ class CMAES(PopulationAlgorithm):
         if diagonal not in (True, False, "auto"):
             raise ValueError(f"diagonal={diagonal!r}: choose True, False or 'auto'.")
         super().__init__(**base_arguments(super().__init__, locals()))
-        self.sigma = sigma
+        self.sigma = python_number(sigma)
         self.population_size = None if population_size is None else check_count("population_size", population_size, 2)
         self.diagonal = diagonal
         self.restarts = restarts

@@ -46,10 +46,22 @@ def constant_value(value: Any) -> Any:
     start = parse_number(value[len("lin_") :]) if isinstance(value, str) and value.startswith("lin_") else None
     if start is not None:  # rl-zoo's linear schedule, for the keys it leaves alone
         return LinearSchedule(start, 0.0, 1.0)  # start * progress_remaining
+    return python_number(value)
+
+
+def python_number(value: Any) -> Any:
+    """
+    A NumPy number as Python's (SB3's schedules take Python numbers only, and a model keeps and saves those), for
+    the hyperparameters that take no schedule.
+
+    :param value: A hyperparameter value.
+    :return: ``int`` for a NumPy integer, ``float`` for another real number (``np.float32``, ``Fraction``), or
+        ``value`` unchanged.
+    """
     if isinstance(value, numbers.Integral) and not isinstance(value, bool | int):
         return int(value)  # NumPy's integers
     if isinstance(value, numbers.Real) and not isinstance(value, numbers.Integral | float):
-        return float(value)  # np.float32, Fraction: SB3's schedules take Python numbers only
+        return float(value)
     return value
 
 

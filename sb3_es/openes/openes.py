@@ -9,7 +9,7 @@ import torch as th
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
 
 from sb3_es.common.arguments import base_arguments
-from sb3_es.common.base_class import constant_value
+from sb3_es.common.base_class import constant_value, python_number
 from sb3_es.common.population_algorithm import (
     PopulationAlgorithm,
     check_noise_table_size,
@@ -148,16 +148,16 @@ class OpenES(PopulationAlgorithm):
         super().__init__(**base_arguments(super().__init__, locals()))
         self.population_size = check_count("population_size", population_size, 2)
         self.sigma = sigma
-        self.sigma_decay = sigma_decay
-        self.sigma_limit = sigma_limit
-        self.learning_rate_decay = learning_rate_decay
-        self.learning_rate_limit = learning_rate_limit
+        self.sigma_decay = python_number(sigma_decay)
+        self.sigma_limit = python_number(sigma_limit)
+        self.learning_rate_decay = python_number(learning_rate_decay)
+        self.learning_rate_limit = python_number(learning_rate_limit)
         self.antithetic = check_flag("antithetic", antithetic)
         self.fitness_shaping: FitnessShaping = fitness_shaping
         self.optimizer = optimizer
-        self.momentum = momentum
-        self.max_speed = max_speed
-        self.weight_decay = weight_decay
+        self.momentum = python_number(momentum)
+        self.max_speed = python_number(max_speed)
+        self.weight_decay = python_number(weight_decay)
         self.forget_best = check_flag("forget_best", forget_best)
         self.noise_table_size = check_noise_table_size(noise_table_size)
         if _init_setup_model:

@@ -9,6 +9,7 @@ import torch as th
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback
 
 from sb3_es.common.arguments import base_arguments
+from sb3_es.common.base_class import python_number
 from sb3_es.common.population_algorithm import PopulationAlgorithm
 from sb3_es.evaluation import PopulationEvaluator
 from sb3_es.pgpe.policies import FlatPolicy
@@ -108,14 +109,14 @@ class PGPE(PopulationAlgorithm):
         check_step_sizes(optimizer, max_speed, center_learning_rate)
         super().__init__(**base_arguments(super().__init__, locals()))
         self.population_size = check_count("population_size", population_size, 2)
-        self.stdev_init = stdev_init
-        self.max_speed = max_speed
-        self.center_learning_rate = center_learning_rate
-        self.stdev_learning_rate = stdev_learning_rate
-        self.stdev_max_change = stdev_max_change
-        self.max_stdev = max_stdev
+        self.stdev_init = python_number(stdev_init)
+        self.max_speed = python_number(max_speed)
+        self.center_learning_rate = python_number(center_learning_rate)
+        self.stdev_learning_rate = python_number(stdev_learning_rate)
+        self.stdev_max_change = python_number(stdev_max_change)
+        self.max_stdev = python_number(max_stdev)
         self.optimizer = optimizer
-        self.momentum = momentum
+        self.momentum = python_number(momentum)
         self.fitness_shaping: FitnessShaping = fitness_shaping
         if _init_setup_model:
             self._setup_model()

@@ -20,7 +20,7 @@ from stable_baselines3.common.vec_env import VecEnv
 from torch.nn import functional as F
 
 from sb3_es.common.arguments import base_arguments
-from sb3_es.common.base_class import ESBaseAlgorithm, constant_value
+from sb3_es.common.base_class import ESBaseAlgorithm, constant_value, python_number
 from sb3_es.common.checks import check_policy_class, check_scheduled_value
 from sb3_es.evaluation.time_limit import end_capped_episodes
 from sb3_es.reinforce.episodes import EpisodeBatch, EpisodeCollector, check_rewards
@@ -163,7 +163,7 @@ class REINFORCE(ESBaseAlgorithm):
         self.normalize_returns = check_flag("normalize_returns", normalize_returns)
         self.use_baseline = check_flag("use_baseline", use_baseline)
         self.ent_coef = float(ent_coef)
-        self.max_grad_norm = max_grad_norm
+        self.max_grad_norm = python_number(max_grad_norm)
         #: Random generator of the per-update env and sampling seeds (saved with the model).
         self._rng: np.random.Generator | None = None
         if _init_setup_model:
