@@ -8,7 +8,7 @@ from typing import Any, ClassVar, TypeVar
 
 import numpy as np
 import torch as th
-from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.callbacks import BaseCallback, ConvertCallback
 from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
 
@@ -188,7 +188,10 @@ class PopulationAlgorithm(StrategyAlgorithm):
     # ------------------------------------------------------------------ training
     def _init_callback(self, callback: MaybeCallback, progress_bar: bool = False) -> BaseCallback:
         if progress_bar:  # SB3's bar counts num_envs per call; a generation's last call can stand for fewer
-            callbacks = callback if isinstance(callback, list) else [] if callback is None else [callback]
+            if callback is None or isinstance(callback, list):
+                callbacks = callback or []
+            else:  # a callback, or a function as SB3 takes it
+                callbacks = [callback if isinstance(callback, BaseCallback) else ConvertCallback(callback)]
             callback = [*callbacks, StepsProgressBarCallback()]
         return super()._init_callback(callback, progress_bar=False)
 
