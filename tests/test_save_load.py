@@ -192,6 +192,34 @@ def test_resume_is_identical_to_an_uninterrupted_run(algo: Algo, n: int, tmp_pat
         np.testing.assert_array_equal(straight.strategy.ask(), resumed.strategy.ask())
 
 
+@pytest.mark.parametrize("algo", ALGORITHMS)
+def test_set_random_seed_repeats_training_as_sb3s_does(algo: Algo) -> None:
+    """As PPO's: a model re-seeded with ``set_random_seed`` trains as a new model with that seed (the strategy's
+    samples and the evaluation seeds included)."""
+    new = build(algo, **MLP, seed=7)
+    reseeded = build(algo, **MLP, seed=3)
+    reseeded.set_parameters(new.get_parameters())
+    reseeded.set_random_seed(7)
+    for model in (new, reseeded):
+        model.learn(2 * GENERATION)
+    np.testing.assert_array_equal(policy_vector(new), policy_vector(reseeded))
+
+
+@pytest.mark.parametrize("algo", ALGORITHMS)
+def test_a_new_seed_given_to_load_restarts_the_random_streams(algo: Algo, tmp_path: Path) -> None:
+    """``load(seed=s)`` trains on alike for the same ``s`` and differently for another; without a seed the saved
+    streams continue (exact resumption, above)."""
+    build(algo, **MLP, seed=3).learn(GENERATION).save(tmp_path / "model.zip")
+
+    def trained_on(seed: int) -> np.ndarray:
+        model = algo.cls.load(tmp_path / "model.zip", env=pendulum_env(), seed=seed)
+        model.learn(GENERATION, reset_num_timesteps=False)
+        return policy_vector(model)
+
+    np.testing.assert_array_equal(trained_on(1), trained_on(1))
+    assert not np.array_equal(trained_on(1), trained_on(2))
+
+
 class SaveMidway(BaseCallback):
     """Saves the model half-way through its first generation."""
 

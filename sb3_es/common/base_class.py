@@ -118,7 +118,8 @@ class ESBaseAlgorithm(BaseAlgorithm):
     """
 
     #: Constructor arguments that ``load()`` may change by setting the attribute alone: read at every update, or
-    #: by SB3 itself (``seed`` seeds the global generators, as in SB3; the saved random streams continue).
+    #: by SB3 itself (a new ``seed`` seeds the global generators and restarts the algorithm's own random streams, as
+    #: SB3 seeds all of PPO's randomness; without one, the saved streams continue).
     _live_hyperparameters: ClassVar[tuple[str, ...]] = (
         "tensorboard_log",
         "verbose",
@@ -361,6 +362,26 @@ class ESBaseAlgorithm(BaseAlgorithm):
         cls._check_live_values(changed)
         return changed
 
+    def set_random_seed(self, seed: int | None = None) -> None:
+        """
+        SB3's seeding (Python, NumPy, torch, the action space), and the algorithm's own random streams (the
+        strategy's samples, the evaluation seeds), which SB3's does not reach: training then repeats as from a new
+        model with this seed.
+
+        :param seed: The seed (``None``: nothing is seeded).
+        """
+        super().set_random_seed(seed)
+        if seed is not None:
+            self._reseed_streams(seed)
+
+    def _reseed_streams(self, seed: int) -> None:
+        """
+        Restart the algorithm's own random generators from ``seed`` as a new model starts them (they are saved with
+        the model, and a loaded model continues them); nothing before they exist.
+
+        :param seed: The seed.
+        """
+
     def _apply_hyperparameters(self, changed: dict[str, Any]) -> None:
         """
         Apply to the loaded model the hyperparameters that ``load()`` changed (SB3's ``load()`` has set the
@@ -368,3 +389,5 @@ class ESBaseAlgorithm(BaseAlgorithm):
 
         :param changed: ``name -> new value``.
         """
+        if changed.get("seed") is not None:  # as SB3's load() seeds PPO anew
+            self._reseed_streams(changed["seed"])

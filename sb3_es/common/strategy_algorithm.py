@@ -11,6 +11,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 import torch as th
+from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.type_aliases import Schedule
 
 from sb3_es.common.base_class import ESBaseAlgorithm
@@ -78,7 +79,7 @@ class StrategyAlgorithm(ESBaseAlgorithm):
     def _setup_model(self) -> None:
         if self.learning_rate is not None:
             self._setup_lr_schedule()  # SB3's lr_schedule attribute, as in SB3; _ask() applies the schedule
-        self.set_random_seed(self.seed)
+        BaseAlgorithm.set_random_seed(self, self.seed)  # not _reseed_streams: a loaded model continues its own
         check_policy_class(self._algorithm_name, self.policy_class, FlatPolicy, self.policy_aliases)
         policy = self.policy_class(self.observation_space, self.action_space, **self.policy_kwargs)
         assert isinstance(policy, FlatPolicy)  # checked above
@@ -94,6 +95,12 @@ class StrategyAlgorithm(ESBaseAlgorithm):
             self._upgrade_legacy_strategy()
             self.strategy.state_version = self.strategy.STATE_VERSION
         self.policy.load_from_vector(self.strategy.center)
+
+    def _reseed_streams(self, seed: int) -> None:
+        if self.strategy is not None:  # the constructor's seeding, from ``seed``
+            strategy_seed, env_seed = np.random.SeedSequence(seed).spawn(2)
+            self.strategy.reseed(strategy_seed)
+            self._env_rng = np.random.default_rng(env_seed)
 
     @abstractmethod
     def _make_strategy(self, center: np.ndarray, seed: np.random.SeedSequence) -> Strategy:
@@ -127,6 +134,7 @@ class StrategyAlgorithm(ESBaseAlgorithm):
 
         :param changed: ``name -> new value``.
         """
+        super()._apply_hyperparameters(changed)
         assert self.strategy is not None
         for name, value in changed.items():
             if name in self.scheduled_hyperparameters and not callable(value):

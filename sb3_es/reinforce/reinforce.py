@@ -12,6 +12,7 @@ from typing import Any, ClassVar, TypeVar
 
 import numpy as np
 import torch as th
+from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
@@ -172,7 +173,7 @@ class REINFORCE(ESBaseAlgorithm):
     # ------------------------------------------------------------------ model
     def _setup_model(self) -> None:
         self._setup_lr_schedule()
-        self.set_random_seed(self.seed)
+        BaseAlgorithm.set_random_seed(self, self.seed)  # not _reseed_streams: a loaded model continues its own
         check_policy_class("REINFORCE", self.policy_class, DiscretizedPolicy, self.policy_aliases)
         self.policy = self.policy_class(  # type: ignore[assignment]
             self.observation_space,
@@ -183,6 +184,10 @@ class REINFORCE(ESBaseAlgorithm):
         ).to(self.device)
         if self._rng is None:  # a loaded model brings its own generator (and its state)
             self._rng = np.random.default_rng(self.seed)
+
+    def _reseed_streams(self, seed: int) -> None:
+        if self._rng is not None:
+            self._rng = np.random.default_rng(seed)  # as _setup_model starts it
 
     def _get_torch_save_params(self) -> tuple[list[str], list[str]]:
         return ["policy", "policy.optimizer"], []

@@ -51,6 +51,14 @@ class Strategy(ABC):
         self.state_version = self.STATE_VERSION
         self._asked: Population | None = None
 
+    def reseed(self, seed: int | np.random.SeedSequence) -> None:
+        """
+        Restart the random stream from ``seed``, as the constructor starts it.
+
+        :param seed: Seed of the strategy's random generator.
+        """
+        self.rng = np.random.default_rng(seed)
+
     @property
     def num_params(self) -> int:
         """:return: Dimension of the search space."""

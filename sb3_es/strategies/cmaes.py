@@ -130,7 +130,7 @@ class CMAESStrategy(Strategy):
         self._large_restarts = 0
         self._solutions: list[np.ndarray] | None = None  # pycma's own list of the candidates asked
         self._exhausted = False
-        self._np_state = np.random.RandomState(int(self.rng.integers(2**31 - 1))).get_state()
+        self._np_state = self._sampling_state()
         if not diagonal:
             check_full_covariance_memory(self.num_params)
         self.es = self._new_es(self.center, self.sigma0, self.base_population_size)
@@ -142,6 +142,14 @@ class CMAESStrategy(Strategy):
                 "generation on the last mean shift, and it adds a mirrored candidate. Use population_size >= "
                 f"{self.min_population_size}, or None for pycma's default ({self.default_population_size})."
             )
+
+    def _sampling_state(self) -> Any:
+        """:return: A NumPy random state drawn from ``rng``, for pycma's samples (it draws from NumPy's global one)."""
+        return np.random.RandomState(int(self.rng.integers(2**31 - 1))).get_state()
+
+    def reseed(self, seed: int | np.random.SeedSequence) -> None:
+        super().reseed(seed)
+        self._np_state = self._sampling_state()
 
     def check_settings(self) -> None:
         self.max_restarts = check_count("max_restarts", self.max_restarts, 0)
