@@ -68,7 +68,7 @@ ARS_ZOO_ENVS = {
     "BipedalWalkerHardcore-v3": "BipedalWalkerHardcore-v3",
 }
 #: rl-zoo ARS entries that ars_es.yml replaces with its own values (the comment says why and what was measured).
-ARS_REPLACED = {"BipedalWalkerHardcore-v3", "LunarLander-v3", "Swimmer-v5"}
+ARS_REPLACED = {"BipedalWalkerHardcore-v3", "LunarLander-v3", "Swimmer-v5", "default"}
 #: Envs whose models are built in the tests (the MuJoCo/dm_control entries of every file are parsed, not built).
 QUICK_ENVS = ("BipedalWalker-v3", "Pendulum-v1", "LunarLanderContinuous-v3")
 #: Entries that failed verification (docs/benchmarks.md, "Verified configs", states the rule): removed from the
