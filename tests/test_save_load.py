@@ -7,6 +7,7 @@ Adam's, REINFORCE's discretization) is checked in that algorithm's file.
 from __future__ import annotations
 
 import base64
+import inspect
 import io
 import json
 import zipfile
@@ -192,12 +193,20 @@ def test_resume_is_identical_to_an_uninterrupted_run(algo: Algo, n: int, tmp_pat
         np.testing.assert_array_equal(straight.strategy.ask(), resumed.strategy.ask())
 
 
-@pytest.mark.parametrize("algo", ALGORITHMS)
-def test_set_random_seed_repeats_training_as_sb3s_does(algo: Algo) -> None:
+@pytest.mark.parametrize(
+    ("algo", "table"),
+    [pytest.param(algo, {}, id=algo.name) for algo in ALGOS]
+    + [
+        pytest.param(algo, dict(noise_table_size=50_000), id=f"{algo.name}-noise_table")
+        for algo in ALGOS
+        if "noise_table_size" in inspect.signature(algo.cls).parameters
+    ],
+)
+def test_set_random_seed_repeats_training_as_sb3s_does(algo: Algo, table: dict[str, int]) -> None:
     """As PPO's: a model re-seeded with ``set_random_seed`` trains as a new model with that seed (the strategy's
-    samples and the evaluation seeds included)."""
-    new = build(algo, **MLP, seed=7)
-    reseeded = build(algo, **MLP, seed=3)
+    samples, its noise table and the evaluation seeds included)."""
+    new = build(algo, **MLP, **table, seed=7)
+    reseeded = build(algo, **MLP, **table, seed=3)
     reseeded.set_parameters(new.get_parameters())
     reseeded.set_random_seed(7)
     for model in (new, reseeded):

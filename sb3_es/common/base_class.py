@@ -365,8 +365,8 @@ class ESBaseAlgorithm(BaseAlgorithm):
     def set_random_seed(self, seed: int | None = None) -> None:
         """
         SB3's seeding (Python, NumPy, torch, the action space), and the algorithm's own random streams (the
-        strategy's samples, the evaluation seeds), which SB3's does not reach: training then repeats as from a new
-        model with this seed.
+        strategy's samples and noise table, the evaluation seeds), which SB3's does not reach: training then repeats
+        as from a new model with this seed.
 
         :param seed: The seed (``None``: nothing is seeded).
         """

@@ -38,6 +38,15 @@ def check_noise_table_size(size: int | None) -> int | None:
     return None if size is None else check_count("noise_table_size", size)
 
 
+def stream_seeds(seed: int | None) -> tuple[np.random.SeedSequence, np.random.SeedSequence]:
+    """
+    :param seed: The model's seed.
+    :return: The seeds of the strategy's random stream (and its noise table) and of the evaluation seeds' stream.
+    """
+    strategy_seed, env_seed = np.random.SeedSequence(seed).spawn(2)
+    return strategy_seed, env_seed
+
+
 def make_noise_table(size: int | None, seed: np.random.SeedSequence, num_params: int) -> SharedNoiseTable | None:
     """
     Build the shared noise table of a strategy, if one was asked for.
@@ -85,7 +94,7 @@ class StrategyAlgorithm(ESBaseAlgorithm):
         assert isinstance(policy, FlatPolicy)  # checked above
         self.policy = policy.to(self.device)
         if self.strategy is None:  # a loaded model brings its strategy (and its random state)
-            strategy_seed, env_seed = np.random.SeedSequence(self.seed).spawn(2)
+            strategy_seed, env_seed = stream_seeds(self.seed)
             center = self.policy.parameters_to_vector()
             if self.zero_policy:
                 center[self.policy.output_layer_slice()] = 0.0
@@ -98,8 +107,11 @@ class StrategyAlgorithm(ESBaseAlgorithm):
 
     def _reseed_streams(self, seed: int) -> None:
         if self.strategy is not None:  # the constructor's seeding, from ``seed``
-            strategy_seed, env_seed = np.random.SeedSequence(seed).spawn(2)
+            strategy_seed, env_seed = stream_seeds(seed)
             self.strategy.reseed(strategy_seed)
+            table = self.strategy.noise_table  # drawn from the strategy's seed too
+            if table is not None:
+                self.strategy.noise_table = make_noise_table(table.size, strategy_seed, self.strategy.num_params)
             self._env_rng = np.random.default_rng(env_seed)
 
     @abstractmethod

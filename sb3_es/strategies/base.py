@@ -10,7 +10,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from sb3_es.strategies.fitness import FitnessShaping, shape_fitness
-from sb3_es.strategies.noise import NoiseTablePopulation
+from sb3_es.strategies.noise import NoiseTablePopulation, SharedNoiseTable
 
 Population = np.ndarray | NoiseTablePopulation
 
@@ -38,6 +38,8 @@ class Strategy(ABC):
     fitness_shaping: FitnessShaping = "raw"
     #: Track only the latest generation's best candidate.
     forget_best: bool = False
+    #: The shared table the candidates' noise is read from (ARS, OpenES, SimpleES take one; ``None``: drawn fresh).
+    noise_table: SharedNoiseTable | None = None
     #: Version of the pickled state: files from before version 2 are upgraded on load (see ``__setstate__``).
     STATE_VERSION = 2
     #: Attributes that hold the generation in progress: what ``ask()`` made and ``tell()`` needs of it.
