@@ -447,6 +447,22 @@ def test_seed_out_of_range(algo: Algo, seed: float) -> None:
         algo.make("Pendulum-v1", 2, seed=seed)
 
 
+@pytest.mark.parametrize("algo", ALGORITHMS)
+def test_numpy_integer_seed(algo: Algo) -> None:
+    # Python's random refuses a NumPy integer deep inside set_random_seed; the model takes it as the same int
+    model = algo.make("Pendulum-v1", 2, seed=np.int64(3))
+    assert type(model.seed) is int and model.seed == 3
+    model.set_random_seed(np.int64(4))
+
+
+@pytest.mark.parametrize("algo", POPULATION_ALGORITHMS)
+def test_predict_refuses_a_nan_observation(algo: Algo) -> None:
+    model = algo.make("Pendulum-v1", 2)
+    model.predict(np.zeros(3, np.float32))
+    with pytest.raises(ValueError, match=r"predict\(\): the observation holds NaN or infinite values"):
+        model.predict(np.array([0.0, np.nan, 1.0], np.float32))
+
+
 @pytest.mark.parametrize("algo", POPULATION_ALGORITHMS)
 def test_population_policy_given_actor_critic_net_arch(algo: Algo) -> None:
     with pytest.raises(ValueError, match=r"net_arch=\{'pi': \[32\], 'vf': \[32\]\}: .*no value network.*\[64, 64\]"):

@@ -131,6 +131,36 @@ def test_unknown_names_are_refused(cls: type[BaseAlgorithm], tmp_path: Path) -> 
 
 
 @pytest.mark.parametrize("cls", list(CASES), ids=lambda cls: cls.__name__)
+def test_learning_rate_is_refused_where_the_algorithm_has_none(cls: type[BaseAlgorithm], tmp_path: Path) -> None:
+    # SB3 saves learning_rate for every algorithm: CMA-ES, PGPE and SimpleES would keep it and never use it.
+    path = saved(cls, tmp_path)
+    if "learning_rate" in inspect.signature(cls).parameters:
+        assert cls.load(path, learning_rate=0.5).learning_rate == 0.5
+    else:
+        with pytest.raises(ValueError, match=rf"{cls.__name__}.load\(\) got learning_rate, which .* does not have"):
+            cls.load(path, learning_rate=0.5)
+
+
+@pytest.mark.parametrize(
+    "cls", [cls for cls in CASES if issubclass(cls, PopulationAlgorithm)], ids=lambda c: c.__name__
+)
+def test_an_unknown_evaluator_is_refused_by_load(cls: type[BaseAlgorithm], tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match=r"evaluator='proceses': use 'local', 'processes', 'ray'"):
+        cls.load(saved(cls, tmp_path), evaluator="proceses")
+
+
+def test_ars_that_used_every_direction_keeps_using_every_direction(tmp_path: Path) -> None:
+    ARS("LinearPolicy", "Pendulum-v1", n_delta=2, seed=0).save(tmp_path / "all.zip")  # n_top=None: every direction
+    for n_delta in (4, 1):
+        loaded = ARS.load(tmp_path / "all.zip", env=make_vec_env("Pendulum-v1", n_envs=2, seed=0), n_delta=n_delta)
+        assert loaded.n_top == n_delta
+        loaded.learn(1)
+        assert loaded.strategy.n_top == n_delta
+    ARS("LinearPolicy", "Pendulum-v1", n_delta=4, n_top=2, seed=0).save(tmp_path / "top.zip")
+    assert ARS.load(tmp_path / "top.zip", n_delta=8).n_top == 2  # a chosen n_top stays
+
+
+@pytest.mark.parametrize("cls", list(CASES), ids=lambda cls: cls.__name__)
 def test_whole_number_floats_given_to_load_are_counts(cls: type[BaseAlgorithm], tmp_path: Path) -> None:
     # rl-zoo's -params or a YAML file may give a count as 2.0: the model and its strategy use the integer 2.
     case = CASES[cls]
@@ -192,10 +222,10 @@ def test_the_saved_stats_window_size_is_no_change(tmp_path: Path) -> None:
         ARS.load(path, stats_window_size=10)
 
 
-def test_ars_n_delta_below_the_saved_n_top_is_refused(tmp_path: Path) -> None:
-    path = saved(ARS, tmp_path)
-    with pytest.raises(ValueError, match=r"n_top=4 must be between 1 and n_delta=2"):
-        ARS.load(path, n_delta=2)
+def test_ars_n_delta_below_a_chosen_n_top_is_refused(tmp_path: Path) -> None:
+    ARS("LinearPolicy", "Pendulum-v1", n_delta=4, n_top=3, seed=0).save(tmp_path / "top.zip")
+    with pytest.raises(ValueError, match=r"n_top=3 must be between 1 and n_delta=2"):
+        ARS.load(tmp_path / "top.zip", n_delta=2)
 
 
 def test_rl_zoos_constant_schedules_are_numbers(tmp_path: Path) -> None:

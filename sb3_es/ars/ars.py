@@ -86,6 +86,12 @@ class ARS(PopulationAlgorithm):
         if _init_setup_model:
             self._setup_model()
 
+    @classmethod
+    def _changed_hyperparameters(cls, data: dict[str, Any], kwargs: dict[str, Any]) -> dict[str, Any]:
+        if "n_delta" in kwargs and "n_top" not in kwargs and data.get("n_top") == data.get("n_delta"):
+            kwargs = {**kwargs, "n_top": None}  # a model that used every direction goes on using every direction
+        return super()._changed_hyperparameters(data, kwargs)
+
     def _apply_hyperparameters(self, changed: dict[str, Any]) -> None:
         if "n_top" in changed and changed["n_top"] is None:  # as in the constructor: every direction
             self.n_top = self.n_delta

@@ -129,9 +129,13 @@ class CMAES(PopulationAlgorithm):
         if completed and self.strategy.last_stop:
             for key, value in self.strategy.last_stop.items():
                 self.logger.record(f"train/stop_{key}", float(value) if isinstance(value, (int, float)) else str(value))
-            if self.strategy.stopped:
-                if self.verbose >= 1:
-                    print(f"CMA-ES stop conditions fired: {self.strategy.last_stop}; training ends.")
+            if self.strategy.stopped:  # a warning, not a print: learn() returns before total_timesteps
+                warnings.warn(
+                    f"CMA-ES stop conditions fired ({self.strategy.last_stop}) at {self.num_timesteps} env steps; "
+                    "training ends before total_timesteps. Pass restarts='ipop' or 'bipop', or relax the stop "
+                    "conditions with cma_options, to keep searching.",
+                    stacklevel=2,
+                )
                 self._stop_training = True
         return completed
 

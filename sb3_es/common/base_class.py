@@ -144,7 +144,7 @@ class ESBaseAlgorithm(BaseAlgorithm):
         seed: int | None,
         max_episode_steps: int | None = None,
     ) -> None:
-        check_seed(seed)
+        seed = check_seed(seed)
         self._check_live_values({"max_episode_steps": max_episode_steps})
         self.max_episode_steps = None if max_episode_steps is None else int(max_episode_steps)
         #: Length limit of the ``TimeLimit`` added to an env given by its id that had none (not saved).
@@ -337,7 +337,8 @@ class ESBaseAlgorithm(BaseAlgorithm):
         :return: ``name -> new value``.
         """
         parameters = cls._parameters()
-        unknown = sorted(set(kwargs) - parameters - set(data))
+        # SB3 saves learning_rate for every algorithm; one without it (CMA-ES, PGPE, SimpleES) would ignore it.
+        unknown = sorted((set(kwargs) - parameters - set(data)) | ((set(kwargs) & {"learning_rate"}) - parameters))
         if unknown:
             raise ValueError(
                 f"{cls.__name__}.load() got {', '.join(unknown)}, which {cls.__name__} does not have (its "
@@ -370,6 +371,7 @@ class ESBaseAlgorithm(BaseAlgorithm):
 
         :param seed: The seed (``None``: nothing is seeded).
         """
+        seed = check_seed(seed)
         super().set_random_seed(seed)
         if seed is not None:
             self._reseed_streams(seed)

@@ -44,16 +44,18 @@ def check_scheduled_value(name: str, value: float, progress_remaining: float, al
         )
 
 
-def check_seed(seed: int | None) -> None:
+def check_seed(seed: int | None) -> int | None:
     """
     Raise a clear error for a seed that NumPy and torch would refuse deep inside ``set_random_seed``.
 
     :param seed: The ``seed`` argument of an algorithm.
+    :return: The seed as a Python ``int`` (Python's ``random`` refuses a NumPy integer), or ``None``.
     """
     if seed is None:
-        return
+        return None
     if isinstance(seed, bool) or not isinstance(seed, numbers.Integral) or not 0 <= seed < 2**32:
         raise ValueError(f"seed={seed!r}: it must be an integer in [0, 2**32 - 1], or None for a random seed.")
+    return int(seed)
 
 
 def check_policy_class(algorithm: str, policy_class: Any, base: type, aliases: Iterable[str]) -> None:

@@ -24,6 +24,17 @@ _FACTORY_HINT = {
 }
 
 
+def check_evaluator_name(evaluator: str | PopulationEvaluator) -> None:
+    """
+    Raise a clear error for an evaluator that is neither a known name nor an instance (what ``load()`` can check
+    before it has an env).
+
+    :param evaluator: The algorithm's ``evaluator`` argument.
+    """
+    if not isinstance(evaluator, PopulationEvaluator) and evaluator not in EVALUATOR_NAMES:
+        raise ValueError(f"evaluator={evaluator!r}: use 'local', 'processes', 'ray' or a PopulationEvaluator instance.")
+
+
 def check_evaluator(evaluator: str | PopulationEvaluator, env_id: str | None, env: VecEnv | None = None) -> None:
     """
     Raise a clear error for an evaluator the model cannot use.
@@ -34,8 +45,7 @@ def check_evaluator(evaluator: str | PopulationEvaluator, env_id: str | None, en
     """
     if isinstance(evaluator, PopulationEvaluator):
         return
-    if evaluator not in EVALUATOR_NAMES:
-        raise ValueError(f"evaluator={evaluator!r}: use 'local', 'processes', 'ray' or a PopulationEvaluator instance.")
+    check_evaluator_name(evaluator)
     if evaluator != "local" and env_id is None:
         if env is None:
             raise ValueError(

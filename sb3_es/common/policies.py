@@ -239,7 +239,12 @@ class FlatPolicy(BasePolicy):
         network = self.network_spec()
         params = self.parameters_to_vector().astype(np.float32)[None]
         # The raw outputs: SB3's predict() then rescales (squash) or clips them as the spec's actions do.
-        out = network.forward(params, network.normalize(network.flatten_obs(obs)))
+        flat = network.flatten_obs(obs)
+        if not np.isfinite(flat).all():  # a NaN would give a silent NaN or arbitrary action (PPO's policy raises too)
+            raise ValueError(
+                "predict(): the observation holds NaN or infinite values; check the env or wrapper that produced it."
+            )
+        out = network.forward(params, network.normalize(flat))
         if isinstance(self.action_space, spaces.Discrete):
             return th.as_tensor(out.argmax(axis=1) + int(self.action_space.start))
         return th.as_tensor(out)

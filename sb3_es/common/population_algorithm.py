@@ -15,7 +15,7 @@ from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedul
 from sb3_es.common.arguments import base_arguments
 from sb3_es.common.base_class import ESBaseAlgorithm
 from sb3_es.common.checks import check_positive
-from sb3_es.common.evaluator_choice import check_evaluator, resolve_evaluator
+from sb3_es.common.evaluator_choice import check_evaluator, check_evaluator_name, resolve_evaluator
 from sb3_es.common.policies import FlatPolicy, LinearPolicy, MlpPolicy
 from sb3_es.common.progress import StepsProgressBarCallback
 from sb3_es.common.remote_monitor import align_clock, write_remote_episodes
@@ -147,6 +147,8 @@ class PopulationAlgorithm(StrategyAlgorithm):
     def _check_live_values(cls, values: dict[str, Any]) -> None:
         check_count("n_eval_episodes", values.get("n_eval_episodes", 1))
         check_flag("common_seeds", values.get("common_seeds", False))
+        if "evaluator" in values:
+            check_evaluator_name(values["evaluator"])
         super()._check_live_values(values)
 
     @property
