@@ -17,12 +17,15 @@ import pytest
 import torch as th
 from algorithms import ALGORITHMS, ALGOS, POPULATION_ALGORITHMS, Algo
 from envs import MultiDiscreteActionEnv
+from gymnasium.wrappers import TimeLimit
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.policies import ActorCriticPolicy, BasePolicy
+from stable_baselines3.common.vec_env import VecNormalize
 
 import sb3_es
 from sb3_es import ARS, CMAES, PGPE, REINFORCE, OpenES, SimpleES
 from sb3_es.evaluation import VecEnvEvaluator
+from sb3_es.evaluation.time_limit import env_time_limit
 
 
 # ---------------------------------------------------------------------------- hyperparameters
@@ -298,10 +301,26 @@ def test_a_flag_given_as_a_string_is_named(cls: type, kwargs: dict[str, Any]) ->
 
 
 @pytest.mark.parametrize("algo", ALGORITHMS)
-def test_max_episode_steps_above_the_envs_own_limit(algo: Algo) -> None:
-    # Pendulum-v1's TimeLimit ends every episode at 200 steps, whatever the cap
-    model = algo.make("Pendulum-v1", 2, max_episode_steps=300)
-    with pytest.raises(ValueError, match=r"max_episode_steps=300 is above the env's own time limit \(200 steps\)"):
+def test_max_episode_steps_above_the_envs_own_limit(algo: Algo, tmp_path: Path) -> None:
+    # Pendulum-v1's TimeLimit ends every episode at 200 steps, whatever the cap: refused as soon as both are known
+    match = r"max_episode_steps=300 is above the env's own time limit \(200 steps\)"
+    with pytest.raises(ValueError, match=match):
+        algo.make("Pendulum-v1", 2, max_episode_steps=300)
+    longer = dict(wrapper_class=TimeLimit, wrapper_kwargs=dict(max_episode_steps=400))
+    model = algo.make(make_vec_env("Pendulum-v1", n_envs=2, **longer), 2, max_episode_steps=300)
+    with pytest.raises(ValueError, match=match):
+        model.set_env(make_vec_env("Pendulum-v1", n_envs=2))
+    assert env_time_limit(model.get_env()) == 400  # the model keeps its env
+    algo.make("Pendulum-v1", 2).save(tmp_path / "model.zip")
+    with pytest.raises(ValueError, match=match):
+        algo.cls.load(tmp_path / "model.zip", env=make_vec_env("Pendulum-v1", n_envs=2), max_episode_steps=300)
+
+
+@pytest.mark.parametrize("algo", POPULATION_ALGORITHMS)
+def test_a_cap_that_a_vec_env_wrapper_hides_names_its_own_limit(algo: Algo) -> None:
+    # VecNormalize would not see a slot reset: the fix is a TimeLimit of the cap itself inside each env
+    model = algo.make(VecNormalize(make_vec_env("Pendulum-v1", n_envs=2)), 2, max_episode_steps=50)
+    with pytest.raises(RuntimeError, match=r"through VecNormalize .*wrapper_kwargs=dict\(max_episode_steps=50\)\)"):
         model.learn(1)
 
 

@@ -256,13 +256,6 @@ def test_set_env_rebuilds_the_workers_from_the_new_env(monkeypatch: pytest.Monke
     assert model._n_updates == 2
 
 
-def test_an_evaluator_name_given_to_load_is_checked(tmp_path: Path) -> None:
-    ARS("LinearPolicy", "Pendulum-v1", n_delta=1).save(tmp_path / "ars.zip")
-    model = ARS.load(tmp_path / "ars.zip", env=make_vec_env("Pendulum-v1"), evaluator="Processes")
-    with pytest.raises(ValueError, match=r"evaluator='Processes': use 'local', 'processes', 'ray'"):
-        model.learn(1)
-
-
 def test_models_in_a_loop() -> None:
     pids: list[int] = []
     for seed in range(3):

@@ -19,6 +19,7 @@ from stable_baselines3.common.on_policy_algorithm import OnPolicyAlgorithm
 from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, Schedule, TensorDict
 from stable_baselines3.common.utils import ConstantSchedule, LinearSchedule
+from stable_baselines3.common.vec_env import VecEnv
 
 from sb3_es.common.checks import check_positive, check_seed
 from sb3_es.common.save_util import check_save_file
@@ -172,15 +173,40 @@ class ESBaseAlgorithm(BaseAlgorithm):
             seed=seed,
         )
         self._algorithm_name = type(self).__name__
+        self._check_episode_cap()  # now, not at learn()
 
     def _excluded_save_params(self) -> list[str]:
         return [*super()._excluded_save_params(), "_added_time_limit", "_warned_time_limit"]
 
     def set_env(self, env: GymEnv, force_reset: bool = True) -> None:
+        env = self._wrap_env(env, self.verbose)  # as SB3's set_env() does (a VecEnv is left as it is)
+        self._check_episode_cap(env)  # before anything changes
         super().set_env(env, force_reset)
         # A new env: its own time limit (or the lack of one) counts from now on.
         self._added_time_limit = None
         self._warned_time_limit = False
+
+    def _check_episode_cap(self, env: VecEnv | None = None) -> int | None:
+        """
+        Refuse a ``max_episode_steps`` above the env's own time limit (at construction, ``load()``, ``set_env()``
+        and training).
+
+        :param env: A VecEnv about to replace the model's (``None``: the model's own).
+        :return: The env's own time limit (``None``: it has none, or it is the one this model added).
+        """
+        if env is None and self._added_time_limit is not None:
+            return None
+        env = env if env is not None else self.env
+        limit = env_time_limit(env) if env is not None else None
+        if limit is None:
+            return None
+        if self.max_episode_steps is not None and self.max_episode_steps > limit:
+            raise ValueError(
+                f"max_episode_steps={self.max_episode_steps} is above the env's own time limit ({limit} steps), "
+                f"which ends every episode first: pass at most {limit}, or give an env made with the longer "
+                f"limit (gym.make(env_id, max_episode_steps={self.max_episode_steps}))."
+            )
+        return limit
 
     def episode_step_limit(self) -> int:
         """
@@ -191,14 +217,8 @@ class ESBaseAlgorithm(BaseAlgorithm):
         :return: The cap, in env steps.
         :raises ValueError: When ``max_episode_steps`` is above the env's own time limit, which ends episodes first.
         """
-        limit = env_time_limit(self.env) if self.env is not None else None
+        limit = self._check_episode_cap()
         if self.max_episode_steps is not None:
-            if limit is not None and self._added_time_limit is None and self.max_episode_steps > limit:
-                raise ValueError(
-                    f"max_episode_steps={self.max_episode_steps} is above the env's own time limit ({limit} steps), "
-                    f"which ends every episode first: pass at most {limit}, or give an env made with the longer "
-                    f"limit (gym.make(env_id, max_episode_steps={self.max_episode_steps}))."
-                )
             return self.max_episode_steps
         if limit is not None and self._added_time_limit is None:
             return limit
@@ -393,3 +413,5 @@ class ESBaseAlgorithm(BaseAlgorithm):
         """
         if changed.get("seed") is not None:  # as SB3's load() seeds PPO anew
             self._reseed_streams(changed["seed"])
+        if "max_episode_steps" in changed:
+            self._check_episode_cap()
