@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -47,6 +48,20 @@ def test_reset_seeds_errors() -> None:
     env = VecNormalize(make_vec_env("Pendulum-v1", n_envs=2), norm_reward=False)
     with pytest.raises(ValueError, match="through VecNormalize.*or set common_seeds=False"):
         VecEnvEvaluator(env).evaluate(policy, population, population[0], 1, seed=0, reset_seeds=np.zeros((2, 1)))
+
+
+@pytest.mark.parametrize("algo", POPULATION_ALGORITHMS)
+def test_a_model_with_common_seeds_refuses_a_vec_env_wrapper_at_once(algo: Algo, tmp_path: Path) -> None:
+    match = "through VecNormalize.*or set common_seeds=False"
+    wrapped = VecNormalize(make_vec_env("Pendulum-v1", n_envs=2), norm_reward=False)
+    with pytest.raises(ValueError, match=match):  # at construction, not at the first generation
+        algo.make(wrapped, 2, common_seeds=True)
+    model = algo.make(make_vec_env("Pendulum-v1", n_envs=2), 2, common_seeds=True)
+    with pytest.raises(ValueError, match=match):
+        model.set_env(wrapped)
+    algo.make(wrapped, 2).save(tmp_path / "model.zip")
+    with pytest.raises(ValueError, match=match):
+        algo.cls.load(tmp_path / "model.zip", env=wrapped, common_seeds=True)
 
 
 class RecordingEvaluator(VecEnvEvaluator):

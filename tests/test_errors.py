@@ -79,7 +79,7 @@ BAD_HYPERPARAMETERS = [
     *each(CMAES, "max_restarts", [-1, 1.5, NAN], r"max_restarts=(-1|1.5|nan): it must be (at least 0|a whole number)"),
     *each(CMAES, "max_restarts", [3], r"max_restarts=3 has no effect without restarts", restarts=None),
     *each(SimpleES, "noise_table_size", [1000.5, 0]),
-    *each(CMAES, "diagonal", ["yes"]),
+    *each(CMAES, "diagonal", ["yes", 1, 0]),
     *each(CMAES, "restarts", ["lpop"]),
     *each(PGPE, "population_size", [3, 7, 0, 4.5, "4"]),
     *each(PGPE, "stdev_init", [0.0]),
@@ -472,6 +472,12 @@ def test_numpy_integer_seed(algo: Algo) -> None:
     model = algo.make("Pendulum-v1", 2, seed=np.int64(3))
     assert type(model.seed) is int and model.seed == 3
     model.set_random_seed(np.int64(4))
+
+
+@pytest.mark.parametrize("algo", ALGORITHMS)
+def test_policy_kwargs_that_is_not_a_dict(algo: Algo) -> None:
+    with pytest.raises(TypeError, match=r"policy_kwargs='net_arch=\[8\]': it must be a dict of the policy's keyword"):
+        algo.make("Pendulum-v1", 2, policy_kwargs="net_arch=[8]")
 
 
 @pytest.mark.parametrize("algo", POPULATION_ALGORITHMS)

@@ -21,7 +21,7 @@ from stable_baselines3.common.type_aliases import GymEnv, Schedule, TensorDict
 from stable_baselines3.common.utils import ConstantSchedule, LinearSchedule
 from stable_baselines3.common.vec_env import VecEnv
 
-from sb3_es.common.checks import check_positive, check_seed
+from sb3_es.common.checks import check_policy_kwargs, check_positive, check_seed
 from sb3_es.common.save_util import check_save_file
 from sb3_es.evaluation.time_limit import env_time_limit
 from sb3_es.strategies.base import check_count, parse_number
@@ -146,6 +146,7 @@ class ESBaseAlgorithm(BaseAlgorithm):
         max_episode_steps: int | None = None,
     ) -> None:
         seed = check_seed(seed)
+        check_policy_kwargs(policy_kwargs)
         self._check_live_values({"max_episode_steps": max_episode_steps})
         self.max_episode_steps = None if max_episode_steps is None else int(max_episode_steps)
         #: Length limit of the ``TimeLimit`` added to an env given by its id that had none (not saved).

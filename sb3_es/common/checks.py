@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import numbers
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from typing import Any
 
 import numpy as np
@@ -72,4 +72,17 @@ def check_policy_class(algorithm: str, policy_class: Any, base: type, aliases: I
         raise TypeError(
             f"{algorithm} needs a {base.__name__} subclass, got {name}: pass one of its policy names "
             f"({', '.join(map(repr, aliases))}) or a subclass of {base.__module__}.{base.__name__}."
+        )
+
+
+def check_policy_kwargs(policy_kwargs: Any) -> None:
+    """
+    Raise a clear error for ``policy_kwargs`` that is not a mapping (``**`` or ``.get`` would fail without naming it).
+
+    :param policy_kwargs: The ``policy_kwargs`` argument of an algorithm.
+    """
+    if policy_kwargs is not None and not isinstance(policy_kwargs, Mapping):
+        raise TypeError(
+            f"policy_kwargs={policy_kwargs!r}: it must be a dict of the policy's keyword arguments, e.g. "
+            'dict(net_arch=[64, 64]) (in an rl-zoo hyperparameter file, the string "dict(net_arch=[64, 64])").'
         )

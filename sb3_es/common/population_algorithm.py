@@ -11,6 +11,7 @@ import torch as th
 from stable_baselines3.common.callbacks import BaseCallback, ConvertCallback
 from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback, Schedule
+from stable_baselines3.common.vec_env import VecEnv
 
 from sb3_es.common.arguments import base_arguments
 from sb3_es.common.base_class import ESBaseAlgorithm
@@ -22,6 +23,7 @@ from sb3_es.common.remote_monitor import align_clock, write_remote_episodes
 from sb3_es.common.step_calls import StepCalls
 from sb3_es.common.strategy_algorithm import StrategyAlgorithm, check_noise_table_size, initial_value, make_noise_table
 from sb3_es.evaluation import PopulationEvaluator, PopulationResult, RewardShaping
+from sb3_es.evaluation.slot_reset import check_common_seeds
 from sb3_es.strategies.base import check_count, check_flag
 
 SelfPopulationAlgorithm = TypeVar("SelfPopulationAlgorithm", bound="PopulationAlgorithm")
@@ -140,8 +142,20 @@ class PopulationAlgorithm(StrategyAlgorithm):
         self._env_rng = None
         check_evaluator(evaluator, self._env_id, self.env)
         self.evaluator = evaluator
+        self._check_common_seeds()
         self._evaluator: PopulationEvaluator | None = None
         self._stop_training = False
+
+    def _check_common_seeds(self, env: VecEnv | None = None) -> None:
+        """
+        With ``common_seeds`` and the local evaluator, refuse a VecEnv whose slots cannot be reset one at a time
+        (now, not at the first generation).
+
+        :param env: A VecEnv about to replace the model's (``None``: the model's own).
+        """
+        env = env if env is not None else self.env
+        if self.common_seeds and self.evaluator == "local" and env is not None:
+            check_common_seeds(env)
 
     @classmethod
     def _check_live_values(cls, values: dict[str, Any]) -> None:
@@ -162,6 +176,8 @@ class PopulationAlgorithm(StrategyAlgorithm):
         shaping = self.reward_shaping  # checks reward_clip, terminal_reward and alive_bonus_offset
         self.reward_clip, self.terminal_reward = shaping.reward_clip, shaping.terminal_reward
         self.alive_bonus_offset = shaping.alive_bonus_offset
+        if "common_seeds" in changed or "evaluator" in changed:
+            self._check_common_seeds()
         super()._apply_hyperparameters(changed)
 
     def _excluded_save_params(self) -> list[str]:
@@ -177,6 +193,7 @@ class PopulationAlgorithm(StrategyAlgorithm):
         :param force_reset: Reset the env before the next ``learn()``.
         """
         env = self._wrap_env(env, self.verbose)
+        self._check_common_seeds(env)
         building_workers = isinstance(self.evaluator, str) and self.evaluator != "local"
         if building_workers:
             check_evaluator(self.evaluator, None, env)  # before anything changes: the workers can rebuild the env

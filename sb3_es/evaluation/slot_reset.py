@@ -17,6 +17,21 @@ def can_reset_slots(env: VecEnv) -> bool:
     return not isinstance(env, VecEnvWrapper)
 
 
+def check_common_seeds(env: VecEnv) -> None:
+    """
+    Raise a clear error when common reset seeds cannot be used on ``env`` (see :func:`can_reset_slots`).
+
+    :param env: The VecEnv that evaluates the candidates.
+    """
+    if not can_reset_slots(env):
+        raise ValueError(
+            f"Common reset seeds (common_seeds=True) reset each candidate's episode on its own, which cannot be "
+            f"done through {type(env).__name__} (the VecEnv wrapper would not see the reset): evaluate on a VecEnv "
+            "without VecEnv wrappers (normalize observations with the policy's normalize_observations instead of "
+            "VecNormalize), or set common_seeds=False."
+        )
+
+
 def reset_slot(env: VecEnv, slot: int, obs: np.ndarray | dict[str, np.ndarray], seed: int | None = None) -> Any:
     """
     Reset the env of one slot and write its first observation into ``obs`` (in place).

@@ -9,7 +9,7 @@ import numpy as np
 from stable_baselines3.common.vec_env import VecEnv, unwrap_vec_normalize
 
 from sb3_es.evaluation.base import Generation, PopulationEvaluator, PopulationResult, StepHook
-from sb3_es.evaluation.slot_reset import can_reset_slots, reset_slot
+from sb3_es.evaluation.slot_reset import check_common_seeds, reset_slot
 from sb3_es.evaluation.time_limit import end_capped_episodes
 
 #: Observations gathered before they are added to the observation statistics.
@@ -64,13 +64,8 @@ class VecEnvEvaluator(PopulationEvaluator):
                     "observations in VecTransposeImage: wrap the evaluator's env in it too.)"
                 )
         reset_seeds = generation.reset_seeds
-        if reset_seeds is not None and not can_reset_slots(env):
-            raise ValueError(
-                f"Common reset seeds (common_seeds=True) reset each candidate's episode on its own, which cannot be "
-                f"done through {type(env).__name__} (the VecEnv wrapper would not see the reset): evaluate on a VecEnv "
-                "without VecEnv wrappers (normalize observations with the policy's normalize_observations instead of "
-                "VecNormalize), or set common_seeds=False."
-            )
+        if reset_seeds is not None:
+            check_common_seeds(env)
         vec_normalize = unwrap_vec_normalize(env)
         if vec_normalize is not None and not vec_normalize.norm_reward:
             vec_normalize = None  # its rewards are the env's

@@ -22,7 +22,7 @@ from torch.nn import functional as F
 
 from sb3_es.common.arguments import base_arguments
 from sb3_es.common.base_class import ESBaseAlgorithm, constant_value, python_number
-from sb3_es.common.checks import check_policy_class, check_scheduled_value
+from sb3_es.common.checks import check_policy_class, check_policy_kwargs, check_scheduled_value
 from sb3_es.evaluation.time_limit import end_capped_episodes
 from sb3_es.reinforce.episodes import EpisodeBatch, EpisodeCollector, check_rewards
 from sb3_es.reinforce.legacy import upgrade_legacy_optimizer_state
@@ -146,6 +146,7 @@ class REINFORCE(ESBaseAlgorithm):
                 learning_rate=learning_rate,
             )
         )
+        check_policy_kwargs(policy_kwargs)
         if policy_kwargs is not None and "use_baseline" in policy_kwargs:
             raise ValueError("Pass use_baseline to REINFORCE, not in policy_kwargs.")
         value_net_arch = (policy_kwargs or {}).get("value_net_arch")
