@@ -191,6 +191,19 @@ def test_every_key_has_a_config_and_a_sampler(key: str) -> None:
     assert key in SAMPLERS and key in CONVERTERS
 
 
+@pytest.mark.parametrize("key", ["learning_rate", "delta_std"])
+def test_a_schedule_key_that_yaml_read_as_a_string_is_named(key: str, tmp_path: Path) -> None:
+    # YAML reads 1e-2 (no dot) as a string, which rl-zoo splits as "lin_X" without naming the key
+    conf = tmp_path / "ars_es.yml"
+    conf.write_text(f"Pendulum-v1:\n  policy: 'LinearPolicy'\n  {key}: 1e-2\n")
+    with pytest.raises(
+        UsageError, match=rf"entry Pendulum-v1: {key}: 1e-2 is read by YAML as the string .*{key}: 1.0e-2"
+    ):
+        prepare_args("train", ["--algo", "ars_es", "--env", "Pendulum-v1", "-conf", str(conf)])
+    conf.write_text(f"Pendulum-v1:\n  policy: 'LinearPolicy'\n  {key}: lin_1.0e-2\n")
+    prepare_args("train", ["--algo", "ars_es", "--env", "Pendulum-v1", "-conf", str(conf)])  # a schedule is fine
+
+
 @pytest.mark.parametrize("command", ["train", "enjoy", "record_video", "push_to_hub", "load_from_hub"])
 def test_old_ars_key_is_refused_with_the_new_one(command: str) -> None:
     with pytest.raises(UsageError, match=r"--algo ars is sb3-contrib's ARS in rl-zoo; sb3-es's ARS is --algo ars_es"):

@@ -13,7 +13,9 @@ import tempfile
 import warnings
 from collections.abc import Iterator, Sequence
 from pathlib import Path
+from typing import Any
 
+from sb3_es.strategies.base import parse_number
 from sb3_es.zoo.registry import ALGOS, UsageError, check_algo, config_entry, default_conf_file, is_sb3_es_algo, register
 
 #: rl-zoo's scripts by command, with rl-zoo's own arguments: ``module:function`` is called, a module without a
@@ -94,6 +96,29 @@ def _spells(flag: str, names: Sequence[str]) -> bool:
     )
 
 
+#: The keys whose string values rl-zoo reads as a schedule ``"lin_X"`` (it splits them at ``_``).
+SCHEDULE_KEYS = ("learning_rate", "delta_std")
+
+
+def check_schedule_strings(conf: str, key: str | None, entry: dict[str, Any]) -> None:
+    """
+    Refuse a number that YAML read as a string (``1e-2``: no dot) under a key that rl-zoo parses as a schedule;
+    rl-zoo would fail with "not enough values to unpack", naming no key.
+
+    :param conf: The hyperparameter file.
+    :param key: The entry's key in it.
+    :param entry: The entry.
+    """
+    for name in SCHEDULE_KEYS:
+        value = entry.get(name)
+        if isinstance(value, str) and not value.startswith("lin_") and parse_number(value) is not None:
+            with_dot = f"{float(value):.1e}".replace("e-0", "e-").replace("e+0", "e+")
+            raise UsageError(
+                f"{conf}, entry {key}: {name}: {value} is read by YAML as the string {value!r} (a number without a "
+                f"dot), which rl-zoo cannot parse as {name}: write it with a dot, e.g. {name}: {with_dot}."
+            )
+
+
 def prepare_args(command: str, args: Sequence[str]) -> list[str]:
     """
     Check ``--algo`` and add the sb3-es defaults to rl-zoo's arguments, saying so.
@@ -120,6 +145,7 @@ def prepare_args(command: str, args: Sequence[str]) -> list[str]:
         env_id = _option_value(args, ("--env",), "CartPole-v1")
         if conf.endswith((".yml", ".yaml")) and Path(conf).is_file():
             key, entry = config_entry(conf, env_id)
+            check_schedule_strings(conf, key, entry)
             if key == "default":
                 print(
                     f"sb3-es: {conf} has no {env_id} entry: {algo} trains with its 'default' entry "
