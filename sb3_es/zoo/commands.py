@@ -111,8 +111,9 @@ def check_schedule_strings(conf: str, key: str | None, entry: dict[str, Any]) ->
     """
     for name in SCHEDULE_KEYS:
         value = entry.get(name)
-        if isinstance(value, str) and not value.startswith("lin_") and parse_number(value) is not None:
-            with_dot = f"{float(value):.1e}".replace("e-0", "e-").replace("e+0", "e+")
+        number = parse_number(value) if isinstance(value, str) else None  # None for "lin_X", rl-zoo's schedule
+        if number is not None:
+            with_dot = f"{number:.1e}".replace("e-0", "e-").replace("e+0", "e+")
             raise UsageError(
                 f"{conf}, entry {key}: {name}: {value} is read by YAML as the string {value!r} (a number without a "
                 f"dot), which rl-zoo cannot parse as {name}: write it with a dot, e.g. {name}: {with_dot}."
