@@ -62,6 +62,9 @@ def test_a_model_with_common_seeds_refuses_a_vec_env_wrapper_at_once(algo: Algo,
     algo.make(wrapped, 2).save(tmp_path / "model.zip")
     with pytest.raises(ValueError, match=match):
         algo.cls.load(tmp_path / "model.zip", env=wrapped, common_seeds=True)
+    model.save(tmp_path / "common.zip")  # the saved setting, with the wrapper given to load()
+    with pytest.raises(ValueError, match=match):
+        algo.cls.load(tmp_path / "common.zip", env=wrapped)
 
 
 class RecordingEvaluator(VecEnvEvaluator):

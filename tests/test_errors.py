@@ -314,6 +314,9 @@ def test_max_episode_steps_above_the_envs_own_limit(algo: Algo, tmp_path: Path) 
     algo.make("Pendulum-v1", 2).save(tmp_path / "model.zip")
     with pytest.raises(ValueError, match=match):
         algo.cls.load(tmp_path / "model.zip", env=make_vec_env("Pendulum-v1", n_envs=2), max_episode_steps=300)
+    model.save(tmp_path / "capped.zip")  # the saved cap, with an env given to load(): refused at load, not at learn()
+    with pytest.raises(ValueError, match=match):
+        algo.cls.load(tmp_path / "capped.zip", env=make_vec_env("Pendulum-v1", n_envs=2))
 
 
 @pytest.mark.parametrize("algo", POPULATION_ALGORITHMS)

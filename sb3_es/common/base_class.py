@@ -181,11 +181,19 @@ class ESBaseAlgorithm(BaseAlgorithm):
 
     def set_env(self, env: GymEnv, force_reset: bool = True) -> None:
         env = self._wrap_env(env, self.verbose)  # as SB3's set_env() does (a VecEnv is left as it is)
-        self._check_episode_cap(env)  # before anything changes
+        self._check_env(env)  # before anything changes
         super().set_env(env, force_reset)
         # A new env: its own time limit (or the lack of one) counts from now on.
         self._added_time_limit = None
         self._warned_time_limit = False
+
+    def _check_env(self, env: VecEnv | None = None) -> None:
+        """
+        Refuse settings that cannot run on ``env`` (at ``set_env()`` and ``load()``; override to add checks).
+
+        :param env: A VecEnv about to replace the model's (``None``: the model's own).
+        """
+        self._check_episode_cap(env)
 
     def _check_episode_cap(self, env: VecEnv | None = None) -> int | None:
         """
@@ -319,6 +327,8 @@ class ESBaseAlgorithm(BaseAlgorithm):
             device = cls._auto_device
         model = super().load(path, env, device, custom_objects, print_system_info, force_reset, **kwargs)
         model._apply_hyperparameters(changed)
+        if model.env is not None:  # SB3 builds the model with this env before the saved settings are restored
+            model._check_env()
         return model
 
     @classmethod

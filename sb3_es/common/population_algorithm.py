@@ -157,6 +157,10 @@ class PopulationAlgorithm(StrategyAlgorithm):
         if self.common_seeds and self.evaluator == "local" and env is not None:
             check_common_seeds(env)
 
+    def _check_env(self, env: VecEnv | None = None) -> None:
+        super()._check_env(env)
+        self._check_common_seeds(env)
+
     @classmethod
     def _check_live_values(cls, values: dict[str, Any]) -> None:
         check_count("n_eval_episodes", values.get("n_eval_episodes", 1))
@@ -193,7 +197,6 @@ class PopulationAlgorithm(StrategyAlgorithm):
         :param force_reset: Reset the env before the next ``learn()``.
         """
         env = self._wrap_env(env, self.verbose)
-        self._check_common_seeds(env)
         building_workers = isinstance(self.evaluator, str) and self.evaluator != "local"
         if building_workers:
             check_evaluator(self.evaluator, None, env)  # before anything changes: the workers can rebuild the env
