@@ -200,6 +200,8 @@ def test_a_schedule_key_that_yaml_read_as_a_string_is_named(key: str, tmp_path: 
         UsageError, match=rf"entry Pendulum-v1: {key}: 1e-2 is read by YAML as the string .*{key}: 1.0e-2"
     ):
         prepare_args("train", ["--algo", "ars_es", "--env", "Pendulum-v1", "-conf", str(conf)])
+    # -params replaces the file's value before rl-zoo reads it: nothing to refuse
+    prepare_args("train", ["--algo", "ars_es", "--env", "Pendulum-v1", "-conf", str(conf), "-params", f"{key}:0.01"])
     conf.write_text(f"Pendulum-v1:\n  policy: 'LinearPolicy'\n  {key}: lin_1.0e-2\n")
     prepare_args("train", ["--algo", "ars_es", "--env", "Pendulum-v1", "-conf", str(conf)])  # a schedule is fine
 
@@ -324,6 +326,12 @@ def test_default_fallback_is_logged(capsys: pytest.CaptureFixture[str]) -> None:
     out = capsys.readouterr().out
     assert "has no CartPole-v1 entry: openes trains with its 'default' entry" in out
     assert "n_timesteps=1000000.0" in out
+    # the values it trains with: -params and -n replace the entry's
+    args = ["--algo", "openes", "--env", "CartPole-v1", "-params", "population_size:8", "n_envs:4", "-n", "5000"]
+    prepare_args("train", args)
+    out = capsys.readouterr().out
+    assert "population_size=8" in out and "n_envs=4" in out and "n_timesteps=5000," in out
+    assert "Add an entry for CartPole-v1" in out
     prepare_args("train", ["--algo", "ars_es", "--env", "CartPole-v1"])
     assert "from the CartPole-v1 entry" in capsys.readouterr().out
     # rl-zoo's own algorithms keep rl-zoo's own files and defaults

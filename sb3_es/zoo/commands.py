@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import importlib
+import itertools
 import os
 import runpy
 import shlex
@@ -96,6 +97,23 @@ def _spells(flag: str, names: Sequence[str]) -> bool:
     )
 
 
+def _hyperparam_overrides(args: Sequence[str]) -> dict[str, str]:
+    """
+    The ``-params key:value ...`` of an argument list, unevaluated (the last ``-params`` wins, as in rl-zoo).
+
+    :param args: Command-line arguments.
+    :return: ``key -> value`` as written.
+    """
+    overrides: dict[str, str] = {}
+    for i, arg in enumerate(args):
+        if _spells(arg, ("-params", "--hyperparams")):
+            overrides = {}
+            for item in itertools.takewhile(lambda a: not a.startswith("-"), args[i + 1 :]):
+                key, _, value = item.partition(":")
+                overrides[key] = value
+    return overrides
+
+
 #: The keys whose string values rl-zoo reads as a schedule ``"lin_X"`` (it splits them at ``_``).
 SCHEDULE_KEYS = ("learning_rate", "delta_std")
 
@@ -146,12 +164,18 @@ def prepare_args(command: str, args: Sequence[str]) -> list[str]:
         env_id = _option_value(args, ("--env",), "CartPole-v1")
         if conf.endswith((".yml", ".yaml")) and Path(conf).is_file():
             key, entry = config_entry(conf, env_id)
-            check_schedule_strings(conf, key, entry)
+            overrides = _hyperparam_overrides(args)
+            check_schedule_strings(conf, key, {k: v for k, v in entry.items() if k not in overrides})
             if key == "default":
+                used = {**entry, **overrides}
+                n_timesteps = _option_value(args, ("-n", "--n-timesteps"), "")
+                if n_timesteps.isdigit() and int(n_timesteps) > 0:  # rl-zoo's -n replaces the entry's n_timesteps
+                    used["n_timesteps"] = int(n_timesteps)
                 print(
                     f"sb3-es: {conf} has no {env_id} entry: {algo} trains with its 'default' entry "
-                    f"({', '.join(f'{k}={v}' for k, v in entry.items())}), not tuned for {env_id}. Add an "
-                    f"{env_id} entry to a copy of the file (--conf-file) or override values with -params key:value."
+                    f"({', '.join(f'{k}={v}' for k, v in used.items())}, with -params and -n applied), not tuned for "
+                    f"{env_id}. Add an entry for {env_id} to a copy of the file (--conf-file) or override values "
+                    "with -params key:value."
                 )
             elif key is not None:
                 print(f"sb3-es: {algo} on {env_id}: hyperparameters from the {env_id} entry of {conf}")
