@@ -31,7 +31,8 @@ def check_scheduled_value(name: str, value: float, progress_remaining: float, al
     :param name: Hyperparameter name, for the message.
     :param value: The schedule's value now.
     :param progress_remaining: SB3's progress remaining (1 to 0) at which it was evaluated.
-    :param allow_zero: Accept 0: a step size (learning rate) that ends at 0 with the training makes no update,
+    :param allow_zero: Accept 0: a step size (learning rate) that ends at 0 with the training adds nothing to the
+        step (an optimizer with momentum coasts on its velocity),
         whereas a noise scale (``sigma``, ``delta_std``) of 0 leaves nothing to explore.
     """
     if not (np.isfinite(value) and (value >= 0 if allow_zero else value > 0)):

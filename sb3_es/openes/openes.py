@@ -84,7 +84,7 @@ class OpenES(PopulationAlgorithm):
         :class:`~sb3_es.strategies.optimizers.ClipUp`).
     :param momentum: SGD's and ClipUp's momentum.
     :param max_speed: ClipUp's largest step (``None``: twice the initial learning rate); ClipUp only.
-    :param weight_decay: L2 coefficient on the mean.
+    :param weight_decay: L2 coefficient on the mean (OpenAI-ES's ``l2coeff`` divided by ``sigma``).
     :param forget_best: Track only the latest generation's best candidate.
     :param noise_table_size: Size of the shared noise table to read perturbations from (``None``: drawn fresh).
 
