@@ -327,8 +327,8 @@ class ESBaseAlgorithm(BaseAlgorithm):
             device = cls._auto_device
         model = super().load(path, env, device, custom_objects, print_system_info, force_reset, **kwargs)
         model._apply_hyperparameters(changed)
-        if model.env is not None:  # SB3 builds the model with this env before the saved settings are restored
-            model._check_env()
+        # The saved or changed settings against the env given (SB3 built the model with it before restoring them).
+        model._check_env()
         return model
 
     @classmethod
@@ -424,5 +424,3 @@ class ESBaseAlgorithm(BaseAlgorithm):
         """
         if changed.get("seed") is not None:  # as SB3's load() seeds PPO anew
             self._reseed_streams(changed["seed"])
-        if "max_episode_steps" in changed:
-            self._check_episode_cap()

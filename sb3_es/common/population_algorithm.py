@@ -180,8 +180,6 @@ class PopulationAlgorithm(StrategyAlgorithm):
         shaping = self.reward_shaping  # checks reward_clip, terminal_reward and alive_bonus_offset
         self.reward_clip, self.terminal_reward = shaping.reward_clip, shaping.terminal_reward
         self.alive_bonus_offset = shaping.alive_bonus_offset
-        if "common_seeds" in changed or "evaluator" in changed:
-            self._check_common_seeds()
         super()._apply_hyperparameters(changed)
 
     def _excluded_save_params(self) -> list[str]:
