@@ -300,6 +300,16 @@ def test_cma_options_are_passed_to_pycma() -> None:
     model = CMAES("LinearPolicy", "Pendulum-v1", cma_options={"tolx": 1e-7, "CMA_elitist": True})
     assert model.strategy.es.opts["tolx"] == 1e-7
     assert model.strategy.es.opts["CMA_elitist"] is True
+    # Strings are evaluated by pycma ("1e-3", as YAML 1.1 reads 1e-3), and the valid string values are kept.
+    model = CMAES("LinearPolicy", "Pendulum-v1", cma_options={"tolfun": "1e-3", "CMA_elitist": "initial"})
+    assert model.strategy.es.opts["tolfun"] == 1e-3 and model.strategy.es.opts["CMA_elitist"] == "initial"
+
+
+@pytest.mark.filterwarnings("ignore:.*is not a safe string")
+def test_cma_options_that_pycma_cannot_read_as_a_number_are_refused_at_construction() -> None:
+    """pycma keeps a string it cannot evaluate and fails in the middle of ``learn()``; the constructor refuses it."""
+    with pytest.raises(ValueError, match=r"cma_options\['tolfun'\]='abc': pycma cannot read it as a number"):
+        CMAES("LinearPolicy", "Pendulum-v1", cma_options={"tolfun": "abc"})
 
 
 # ---------------------------------------------------------------------------- strategy alone

@@ -19,7 +19,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 from envs import ToyEnv
-from gymnasium.wrappers import ClipReward
+from gymnasium.wrappers import ClipReward, TransformReward
 from sb3_contrib.common.wrappers import TimeFeatureWrapper
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.monitor import load_results
@@ -229,8 +229,16 @@ def test_evaluator_processes_from_envs_registered_with_a_partial() -> None:
             model._evaluator.close()  # type: ignore[union-attr]
         assert model._n_updates == 1 and model.num_timesteps >= 4 * 200  # 2 * n_delta episodes of 200 steps, at least
         differ = DummyVecEnv([lambda: gym.make("Pendulum-v1", g=9.0), lambda: gym.make("Pendulum-v1", g=10.0)])
-        with pytest.raises(ValueError, match=r"envs differ.*give the env id instead \(env='Pendulum-v1'\)"):
+        with pytest.raises(
+            ValueError, match=r"envs differ, in their specs' kwargs: give the env id instead \(env='Pen"
+        ):
             ARS("LinearPolicy", differ, evaluator="processes")
+        # A lambda made anew for each env: the message names the wrapper argument and how to share it.
+        fresh = make_vec_env("Pendulum-v1", n_envs=2, wrapper_class=lambda e: TransformReward(e, lambda r: 0.01 * r))
+        with pytest.raises(
+            ValueError, match=r"differ, in the TransformReward wrapper's func \(a function or lambda made"
+        ):
+            ARS("LinearPolicy", fresh, evaluator="processes")
     finally:
         del gym.registry["PartialPendulum-v0"]
 

@@ -46,6 +46,31 @@ def _same_spec(spec: EnvSpec, other: EnvSpec) -> bool:
     return spec == other
 
 
+def _spec_difference(spec: EnvSpec, other: EnvSpec) -> str:
+    """Where two envs' specs differ, in words: the wrapper argument, or else the first differing field."""
+    first, second = spec.additional_wrappers, other.additional_wrappers
+    if len(first) == len(second):
+        for mine, theirs in zip(first, second, strict=True):
+            if mine == theirs:
+                continue
+            if mine.name == theirs.name and mine.kwargs is not None and theirs.kwargs is not None:
+                keys = [
+                    key for key in {**mine.kwargs, **theirs.kwargs} if mine.kwargs.get(key) != theirs.kwargs.get(key)
+                ]
+                hint = (
+                    " (a function or lambda made anew for each env is a new object each time: define it once and "
+                    "pass that one to every env)"
+                    if any(callable(mine.kwargs.get(key)) for key in keys)
+                    else ""
+                )
+                return f"in the {mine.name} wrapper's {', '.join(keys)}{hint}"
+            return f"in their wrappers, {mine.name} and {theirs.name}"
+    for field in dataclasses.fields(EnvSpec):
+        if getattr(spec, field.name) != getattr(other, field.name):
+            return f"in their specs' {field.name}"
+    return "in their specs"
+
+
 def env_recipe(env: VecEnv, evaluator: str) -> tuple[functools.partial[gym.Env], WorkerEnvArgs]:
     """
     The env factory and ``make_vec_env`` arguments with which a worker builds envs like those of ``env``.
@@ -71,8 +96,10 @@ def env_recipe(env: VecEnv, evaluator: str) -> tuple[functools.partial[gym.Env],
         )
     if spec is None:
         raise ValueError(f"evaluator={evaluator!r}: the env was not built by gym.make (it has no spec): {fix}.")
-    if any(other is None or not _same_spec(spec, other) for other in specs[1:]):
-        raise ValueError(f"evaluator={evaluator!r}: the VecEnv's envs differ (their specs are not equal): {fix}.")
+    for other in specs[1:]:
+        if other is None or not _same_spec(spec, other):
+            why = "one has no spec" if other is None else _spec_difference(spec, other)
+            raise ValueError(f"evaluator={evaluator!r}: the VecEnv's envs differ, {why}: {fix}.")
     wrappers = tuple(spec.additional_wrappers)
     names = [wrapper.entry_point for wrapper in wrappers]
     cut = names.index(_MONITOR) if _MONITOR in names else len(wrappers)

@@ -134,6 +134,7 @@ class CMAESStrategy(Strategy):
         if not diagonal:
             check_full_covariance_memory(self.num_params)
         self.es = self._new_es(self.center, self.sigma0, self.base_population_size)
+        self._check_cma_options()
         if self.base_population_size < self.min_population_size:
             raise ValueError(
                 f"population_size={self.base_population_size} is too small for CMA-ES on {self.num_params} "
@@ -142,6 +143,26 @@ class CMAESStrategy(Strategy):
                 "generation on the last mean shift, and it adds a mirrored candidate. Use population_size >= "
                 f"{self.min_population_size}, or None for pycma's default ({self.default_population_size})."
             )
+
+    def _check_cma_options(self) -> None:
+        """Refuse a string that pycma could not read as the number an option needs: pycma keeps it and fails later."""
+        cma = _import_cma()
+        defaults = cma.CMAOptions(cma.CMAOptions().defaults())
+        names = {"N": self.num_params, "dim": self.num_params, "popsize": self.base_population_size}
+        for key, value in self.cma_options.items():
+            if not isinstance(self.es.opts.get(key), str):
+                continue
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                try:
+                    default = defaults.eval(key, loc=names)
+                except Exception:  # an option whose default needs more than these names: left to pycma
+                    continue
+            if isinstance(default, int | float) and not isinstance(default, bool):
+                raise ValueError(
+                    f"cma_options[{key!r}]={value!r}: pycma cannot read it as a number, which this option needs "
+                    f"(pycma's default here: {default!r}); give a number."
+                )
 
     def _sampling_state(self) -> Any:
         """:return: A NumPy random state drawn from ``rng``, for pycma's samples (it draws from NumPy's global one)."""
