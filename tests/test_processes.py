@@ -14,6 +14,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -355,3 +356,79 @@ def test_ctrl_c_leaves_no_process() -> None:
     _, err = script.communicate(timeout=600)
     assert script.returncode != 0 and "KeyboardInterrupt" in err
     assert wait_gone(pids)
+
+
+KILLED_DRIVER_SCRIPT = """
+import os
+import sys
+import time
+
+import gymnasium as gym
+
+from sb3_es import ARS
+from sb3_es.evaluation.processes import ProcessEvaluator
+
+
+class Slow(gym.Wrapper):
+    def step(self, action):
+        time.sleep(self.delay)
+        return self.env.step(action)
+
+
+def make():  # the first env made is slow: its worker is still busy when the other one lingers
+    env = Slow(gym.make("Pendulum-v1"))
+    try:
+        os.close(os.open(sys.argv[1], os.O_CREAT | os.O_EXCL))
+        env.delay = 0.005
+    except FileExistsError:
+        env.delay = 0.0
+    return env
+
+
+evaluator = ProcessEvaluator(make, num_workers=2, envs_per_worker=1)
+model = ARS("LinearPolicy", "Pendulum-v1", n_delta=2, evaluator=evaluator)
+evaluator.start()
+print(" ".join(str(p.pid) for p in evaluator._workers), flush=True)
+model.learn(10**9)
+"""
+
+
+def test_killed_driver_leaves_no_process(tmp_path: Path) -> None:
+    """A driver killed at once (SIGKILL: the OOM killer, a crashed kernel) leaves no worker running, including one
+    that was lingering on the center policy."""
+    script = subprocess.Popen(
+        [sys.executable, "-c", KILLED_DRIVER_SCRIPT, str(tmp_path / "slow")],
+        cwd=REPO,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
+    assert script.stdout is not None
+    pids = [int(pid) for pid in script.stdout.readline().split()]
+    assert len(pids) == 2
+    time.sleep(1.0)  # the slow worker's share takes 2 s (2 episodes of 200 steps at 5 ms): the other one lingers
+    script.kill()
+    script.communicate(timeout=60)
+    try:
+        assert wait_gone(pids, timeout=20.0)
+    finally:
+        for pid in pids:
+            if not gone(pid):
+                os.kill(pid, signal.SIGKILL)
+
+
+def test_a_failed_call_leaves_the_workers_usable() -> None:
+    """When a call fails in one worker, the other workers' replies are read too: none is left for the next call."""
+    with ProcessEvaluator("Pendulum-v1", num_workers=2, envs_per_worker=1) as evaluator:
+        evaluator.start()
+        first = evaluator._workers[0].pid
+
+        def fails_in_the_first(venv: Any) -> str:
+            if os.getpid() == first:
+                raise KeyError("only the first worker fails")
+            return "a reply from the second"
+
+        with pytest.raises(KeyError, match="only the first worker fails"):
+            evaluator.call_workers(fails_in_the_first)
+        assert evaluator.call_workers(lambda venv: venv.num_envs) == [1, 1]

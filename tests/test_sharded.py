@@ -6,6 +6,7 @@ from __future__ import annotations
 import logging
 import os
 import signal
+import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -260,13 +261,24 @@ def test_faults(host: str, tmp_path: Path, caplog: pytest.LogCaptureFixture, mon
         return CrashingToyEnv(crash_flag, error_flag)
 
     with make_evaluator(host, crashing_env, num_workers=2) as evaluator:
-        # One worker's process dies mid-generation: it is replaced and its share re-run.
+        # One worker's process dies mid-generation: it is replaced and its share re-run. The replacement takes
+        # a while to start (here 1 s more); the worker that is done stops lingering meanwhile, or its center-policy
+        # steps (thousands per second on ToyEnv) would all count.
+        replace = evaluator.pool.replace
+
+        def slow_replace(k: int) -> None:
+            time.sleep(1.0)
+            replace(k)
+
+        monkeypatch.setattr(evaluator.pool, "replace", slow_replace)
         with caplog.at_level(logging.WARNING):
             result = evaluator.evaluate(policy, population, center, 1, seed=0)
+        monkeypatch.undo()
         assert os.path.exists(crash_flag)
         assert evaluator.restarted_workers == 1
         assert any("died" in record.getMessage() for record in caplog.records)
         assert_same_candidates(result, local)
+        assert result.n_steps < 20 * local.n_steps, (result.n_steps, local.n_steps)
 
         # A worker killed between generations is replaced too.
         kill_worker(evaluator, 1)

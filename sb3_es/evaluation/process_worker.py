@@ -8,6 +8,7 @@ re-raised in the driver with that traceback as its cause.
 
 from __future__ import annotations
 
+import os
 import pickle
 import signal
 import traceback
@@ -39,6 +40,7 @@ class RemoteTraceback(Exception):
 def worker_main(conn: Connection, config: bytes, stop: Any, tables: list[SharedNoiseTable]) -> None:
     """Body of a worker process: build the envs, then serve calls until the driver says so or goes away."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the driver stops its workers on Ctrl-C
+    driver = os.getppid()
     for end in list(DRIVER_ENDS):  # copies inherited by fork
         end.close()
 
@@ -60,7 +62,10 @@ def worker_main(conn: Connection, config: bytes, stop: Any, tables: list[SharedN
             def share_done() -> None:
                 conn.send(("done", token))
 
-            reply("result", runner.run(payload, jobs, seed, share_done, lambda: stop.value != token))
+            def keep_lingering() -> bool:  # until the driver says so, or is gone (the worker is then re-parented)
+                return stop.value != token and os.getppid() == driver
+
+            reply("result", runner.run(payload, jobs, seed, share_done, keep_lingering))
         elif kind == "table":
             runner.noise_tables[args.key] = args.noise
         elif kind == "call":

@@ -200,9 +200,25 @@ class ProcessPool(WorkerPool):
         self._wait_ready(k, time.monotonic() + self.start_timeout)
 
     def call(self, fn: Callable[[VecEnv], Any]) -> list[Any]:
+        message = ("call", cloudpickle.dumps(fn))
+        sent: list[int] = []
+        failure: Exception | None = None
         for k in range(self.num_workers):
-            self._send(k, ("call", cloudpickle.dumps(fn)))
-        return [self.result(k, None) for k in range(self.num_workers)]
+            try:
+                self._send(k, message)
+            except WorkerDied as e:
+                failure = e
+                break
+            sent.append(k)
+        results = []
+        for k in sent:  # every reply is read, also after an error, so that none is left over for the next call
+            try:
+                results.append(self.result(k, None))
+            except Exception as e:
+                failure = failure or e
+        if failure is not None:
+            raise failure
+        return results
 
 
 def default_start_method() -> str:
@@ -252,6 +268,7 @@ class ProcessEvaluator(ShardedEvaluator):
     """
 
     worker_name = "worker process"
+    workers_name = "worker processes"
     restarts_argument = "max_worker_restarts"
 
     def __init__(

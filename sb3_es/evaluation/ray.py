@@ -243,6 +243,7 @@ class RayEvaluator(ShardedEvaluator):
     """
 
     worker_name = "Ray actor"
+    workers_name = "Ray actors"
     restarts_argument = "max_actor_restarts"
 
     def __init__(

@@ -78,8 +78,9 @@ class ShardedEvaluator(PopulationEvaluator, ABC):
     :param linger: Whether finished workers run the center policy while the others finish their shares.
     """
 
-    #: How the workers are named in messages.
+    #: How the workers are named in messages, one and several.
     worker_name = "worker"
+    workers_name = "workers"
     #: The constructor argument that sets ``max_restarts`` (named in messages).
     restarts_argument = "max_restarts"
 
@@ -262,7 +263,11 @@ class ShardedEvaluator(PopulationEvaluator, ABC):
                 k, error = pool.wait_share_done(sorted(pending), _remaining(deadline))
                 if error is None:
                     pending.discard(k)
-                else:  # a dead worker's share is re-run (with lingering) by its replacement
+                else:  # a dead worker's share is re-run by its replacement; the finished ones stop lingering,
+                    # since their center-policy steps, counted in num_timesteps, would fill its start-up time
+                    for j in range(len(shares)):
+                        if j not in pending:
+                            pool.stop_lingering(j, token)
                     replace(k, error)
                     submit(k, True)
             if linger:
@@ -279,16 +284,16 @@ class ShardedEvaluator(PopulationEvaluator, ABC):
                         submit(k, False)
         except TimeoutError as e:
             raise TimeoutError(
-                f"The {self.worker_name}s did not finish the generation within generation_timeout="
+                f"The {self.workers_name} did not finish the generation within generation_timeout="
                 f"{self.generation_timeout} s: an episode may never end (an env without a time limit?) or a "
-                f"{self.worker_name} is stuck in the env. The {self.worker_name}s were stopped."
+                f"{self.worker_name} is stuck in the env. The {self.workers_name} were stopped."
             ) from e
         return outputs, shares
 
     def _replace(self, pool: WorkerPool, k: int, error: WorkerDied, restarts_this_generation: int) -> None:
         if restarts_this_generation > self.max_restarts:
             raise RuntimeError(
-                f"{self.worker_name.capitalize()}s died {restarts_this_generation} times in one generation "
+                f"{self.workers_name.capitalize()} died {restarts_this_generation} times in one generation "
                 f"({self.restarts_argument}={self.max_restarts}); last error: {error}"
             ) from error
         pool.replace(k)

@@ -145,16 +145,6 @@ class ShareRunner:
         :return: The engine's result, the dones and rewards of every vec step, the done slots' infos (without
             ``terminal_observation``) and the timings (in the engine, of which lingering).
         """
-        network: NetworkSpec = payload["network"]
-        self._set_clock(payload["clock_start"])
-        center = payload["center"]
-        candidates = jobs % payload["n_candidates"]
-        reset_seeds = None if payload["reset_seeds"] is None else payload["reset_seeds"][jobs][:, None]
-        if payload["population"] is not None:
-            rows = payload["population"][candidates]
-        else:
-            key, offsets, scales = payload["noise"]
-            rows = noise_rows(self.noise_tables[tuple(key)], center, offsets[candidates], scales[candidates])
         dones_log: list[np.ndarray] = []
         rewards_log: list[np.ndarray] = []
         done_infos: list[tuple[int, int, dict[str, Any]]] = []
@@ -179,7 +169,17 @@ class ShareRunner:
                 return lingering()
 
         start = time.perf_counter()
-        try:
+        try:  # from here on, share_done() is called whatever happens, so that the driver's wait ends
+            network: NetworkSpec = payload["network"]
+            self._set_clock(payload["clock_start"])
+            center = payload["center"]
+            candidates = jobs % payload["n_candidates"]
+            reset_seeds = None if payload["reset_seeds"] is None else payload["reset_seeds"][jobs][:, None]
+            if payload["population"] is not None:
+                rows = payload["population"][candidates]
+            else:
+                key, offsets, scales = payload["noise"]
+                rows = noise_rows(self.noise_tables[tuple(key)], center, offsets[candidates], scales[candidates])
             generation = Generation(
                 network, rows, center, 1, seed, payload["shaping"], payload["max_episode_steps"], reset_seeds
             )
