@@ -327,6 +327,22 @@ def test_a_cap_that_a_vec_env_wrapper_hides_names_its_own_limit(algo: Algo) -> N
         model.learn(1)
 
 
+@pytest.mark.parametrize("algo", POPULATION_ALGORITHMS)
+def test_observations_normalized_twice_are_warned_about(algo: Algo) -> None:
+    """A VecNormalize (rl-zoo's ``normalize: true``) and the policy's running normalization: a warning names both."""
+    match = r"VecNormalize\(norm_obs=True\) and the policy normalizes observations itself .* normalized twice"
+    with pytest.warns(UserWarning, match=match):
+        model = algo.make(VecNormalize(make_vec_env("Pendulum-v1", n_envs=2)), 2)
+    with pytest.warns(UserWarning, match=match):
+        model.set_env(VecNormalize(make_vec_env("Pendulum-v1", n_envs=2)))
+    with warnings.catch_warnings():
+        warnings.filterwarnings("error", message=".*normalized twice")
+        algo.make(VecNormalize(make_vec_env("Pendulum-v1", n_envs=2), norm_obs=False), 2)
+        algo.make(
+            VecNormalize(make_vec_env("Pendulum-v1", n_envs=2)), 2, policy_kwargs=dict(normalize_observations=False)
+        )
+
+
 @pytest.mark.parametrize("algo", ALGORITHMS)
 def test_whole_number_floats_are_counts(algo: Algo) -> None:
     # A YAML file or rl-zoo's -params can give a count as 4.0: it is used as the integer 4.

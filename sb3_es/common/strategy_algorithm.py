@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import io
 import pathlib
+import warnings
 from abc import abstractmethod
 from collections.abc import Iterable
 from typing import Any, ClassVar
@@ -13,6 +14,7 @@ import numpy as np
 import torch as th
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.type_aliases import Schedule
+from stable_baselines3.common.vec_env import VecEnv, unwrap_vec_normalize
 
 from sb3_es.common.base_class import ESBaseAlgorithm
 from sb3_es.common.checks import check_policy_class, check_positive, check_scheduled_value
@@ -104,6 +106,26 @@ class StrategyAlgorithm(ESBaseAlgorithm):
             self._upgrade_legacy_strategy()
             self.strategy.state_version = self.strategy.STATE_VERSION
         self.policy.load_from_vector(self.strategy.center)
+        self._warn_double_normalization(self.env)
+
+    def _check_env(self, env: VecEnv | None = None) -> None:
+        super()._check_env(env)
+        if env is not None:
+            self._warn_double_normalization(env)
+
+    def _warn_double_normalization(self, env: VecEnv | None) -> None:
+        """Warn when a ``VecNormalize`` and the policy both normalize the observations."""
+        policy = getattr(self, "policy", None)
+        normalize = None if env is None else unwrap_vec_normalize(env)
+        if normalize is not None and normalize.norm_obs and policy is not None and policy.normalize_observations:
+            warnings.warn(
+                "The env is wrapped in VecNormalize(norm_obs=True) and the policy normalizes observations itself "
+                "(normalize_observations=True, ARS-V2), so they are normalized twice. Keep one: "
+                "VecNormalize(norm_obs=False) (in an rl-zoo file, drop the normalize key), or "
+                "policy_kwargs=dict(normalize_observations=False).",
+                UserWarning,
+                stacklevel=2,
+            )
 
     def _reseed_streams(self, seed: int) -> None:
         if self.strategy is not None:  # the constructor's seeding, from ``seed``
