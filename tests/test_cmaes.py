@@ -287,6 +287,8 @@ def test_bipop_runs_large_and_small_regimes() -> None:
     base = model.strategy.base_population_size
     assert any(size > base and sigma == pytest.approx(0.1) for size, sigma in restarted)  # large regime
     assert any(size <= base and sigma < 0.1 for size, sigma in restarted)  # small regime: smaller steps
+    # The first run counts on the small budget (as in pycma's fmin and Hansen's code): the first restart is large.
+    assert restarted[0] == (2 * base, pytest.approx(0.1))
     assert np.all(np.isfinite(model.policy.parameters_to_vector()))
 
 

@@ -126,7 +126,7 @@ class CMAESStrategy(Strategy):
         self.n_restarts = 0
         self.last_stop: dict[str, Any] = {}
         self._budget = {"large": 0, "small": 0}
-        self._regime = "large"
+        self._regime = "small"  # the first run counts on the small budget, as in pycma's fmin and Hansen's code
         self._large_restarts = 0
         self._solutions: list[np.ndarray] | None = None  # pycma's own list of the candidates asked
         self._exhausted = False
