@@ -67,6 +67,16 @@ def test_noise_table_population() -> None:
     np.testing.assert_array_equal(population.scales, 0.2)
     strategy.tell(np.array([0.0, 1.0, 5.0, 2.0, 3.0, 4.0]))
     np.testing.assert_array_equal(strategy.center, dense[2])
+    # The elite rows are read alone: the whole population is not built (a remote evaluator never builds it).
+    strategy = SimpleESStrategy(
+        np.ones(4), 6, sigma=0.2, n_elite=2, noise_table=SharedNoiseTable(10_000, seed=0), seed=0
+    )
+    population = strategy.ask()
+    assert isinstance(population, NoiseTablePopulation)
+    dense = NoiseTablePopulation(population.table, population.center, population.offsets, population.scales).dense()
+    strategy.tell(np.array([0.0, 1.0, 5.0, 2.0, 3.0, 4.0]))
+    assert population._dense is None
+    np.testing.assert_allclose(strategy.center, strategy.elite_weights @ dense[[2, 5]], rtol=1e-12)
 
 
 # ---------------------------------------------------------------------------- learning

@@ -145,6 +145,15 @@ class NoiseTablePopulation:
             self._dense = noise_rows(self.table.noise, self.center, self.offsets, self.scales)
         return self._dense
 
+    def rows(self, indices: np.ndarray) -> np.ndarray:
+        """
+        :param indices: Which candidates.
+        :return: Those candidates, float64, equal to ``dense()[indices]`` (without building the others).
+        """
+        if self._dense is not None:
+            return self._dense[indices]
+        return noise_rows(self.table.noise, self.center, self.offsets[indices], self.scales[indices])
+
     def row(self, index: int) -> np.ndarray:
         """
         :param index: Which candidate.

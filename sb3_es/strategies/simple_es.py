@@ -96,7 +96,9 @@ class SimpleESStrategy(Strategy):
     def _tell(self, fitness: np.ndarray) -> dict[str, float]:
         assert self._asked is not None
         elite = np.argsort(-fitness, kind="stable")[: self.n_elite]  # ties: the first asked wins
-        center = self.elite_weights @ np.asarray(self._asked)[elite]  # n_elite=1: exactly the best child
+        asked = self._asked
+        rows = asked.rows(elite) if isinstance(asked, NoiseTablePopulation) else np.asarray(asked)[elite]
+        center = self.elite_weights @ rows  # n_elite=1: exactly the best child
         step_norm = float(np.linalg.norm(center - self.center))
         self.center = center
         return {"sigma": self.sigma, "step_norm": step_norm}
