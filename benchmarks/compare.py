@@ -283,9 +283,12 @@ class RecordingEvalCallback(EvalCallback):
     :param confirm_episodes: With ``stop_at``: an evaluation reaching it is confirmed on this many more episodes
         (evaluation time, excluded from training time), and training stops only if their mean reaches it too;
         the confirmed model is saved as ``confirmed_model.zip`` (0: the evaluation alone decides).
+    :param vecnormalize_path: Where rl-zoo keeps the run's ``VecNormalize`` statistics (``<run>/<env>/
+        vecnormalize.pkl``, read by ``--continue-from``); None: not saved.
 
     After every evaluation the model is saved as ``last_model.zip`` in ``log_path`` (strategy state included, in
-    evaluation time): the checkpoint that ``--continue-from`` trains on from.
+    evaluation time), with the training env's ``VecNormalize`` statistics if it has any: the checkpoint that
+    ``--continue-from`` trains on from, also when the run was stopped before its end.
     """
 
     def __init__(
@@ -299,6 +302,7 @@ class RecordingEvalCallback(EvalCallback):
         stop_at: float | None = None,
         budget_steps: int | None = None,
         confirm_episodes: int = 0,
+        vecnormalize_path: str | None = None,
     ) -> None:
         super().__init__(
             eval_env,
@@ -314,9 +318,11 @@ class RecordingEvalCallback(EvalCallback):
         self.budget_seconds = budget_seconds
         self.stop_at = stop_at
         self.confirm_episodes = max(int(confirm_episodes), 0)
+        self.vecnormalize_path = vecnormalize_path
         #: Confirmations: ``env_steps``, ``wall_s`` (training wall-clock), ``mean_return``, ``std_return``.
         self.confirmations: list[dict[str, float]] = []
         self._checked = 0  # evaluations checked against stop_at
+        self.reached = False  # whether one reached it (confirmed, with confirm_episodes)
         self.progress = progress
         self.next_eval = self.grid
         #: Training wall-clock (s) and total wall-clock (s) of each evaluation, in the order of evaluations.npz.
@@ -345,6 +351,10 @@ class RecordingEvalCallback(EvalCallback):
         start = time.perf_counter()
         continue_training = super()._on_step()  # eval_freq=1: evaluates now
         self.model.save(Path(self.best_model_save_path or ".") / "last_model")
+        normalize = self.model.get_vec_normalize_env()
+        if normalize is not None and self.vecnormalize_path is not None:
+            Path(self.vecnormalize_path).parent.mkdir(parents=True, exist_ok=True)
+            normalize.save(self.vecnormalize_path)
         self.eval_seconds += time.perf_counter() - start
         self.train_s.append(round(self.train_seconds(), 3))
         self.total_s.append(round(time.perf_counter() - self._start, 3))
@@ -382,21 +392,29 @@ class RecordingEvalCallback(EvalCallback):
         )
         return mean >= self.stop_at
 
+    def _reached(self) -> bool:
+        """:return: Whether a new evaluation reached ``stop_at`` (and, with ``confirm_episodes``, was confirmed)."""
+        if self.stop_at is None or len(self.train_s) <= self._checked:
+            return False
+        self._checked = len(self.train_s)
+        self.reached = self.last_mean_reward >= self.stop_at and (not self.confirm_episodes or self._confirm())
+        return self.reached
+
     def _on_step(self) -> bool:
         continue_training = self._evaluate() if self._grid_point_due() else True
         train_s = self.train_seconds()
         self.progress.update(self.num_timesteps, train_s, self.last_mean_reward if self.train_s else None)
+        if self._reached():  # checked first: an evaluation at the end of the time budget counts too
+            return False
         if self.budget_seconds is not None and train_s >= self.budget_seconds:
             return False
-        if self.stop_at is not None and len(self.train_s) > self._checked:  # a new evaluation to check
-            self._checked = len(self.train_s)
-            if self.last_mean_reward >= self.stop_at and (not self.confirm_episodes or self._confirm()):
-                return False
         return continue_training
 
     def _on_training_end(self) -> None:
         if not self.evaluations_timesteps or self.evaluations_timesteps[-1] != self.num_timesteps:
             self._evaluate()
+        if not self.reached:
+            self._reached()  # the final evaluation is confirmed too (with confirm_episodes), as the grid ones are
         self.progress.update(self.num_timesteps, self.train_seconds(), self.last_mean_reward, force=True)
         super()._on_training_end()
 
@@ -518,6 +536,7 @@ def run_one(
         stop_at=stop_at,
         budget_steps=offset + total,
         confirm_episodes=confirm_episodes,
+        vecnormalize_path=str(Path(manager.params_path) / "vecnormalize.pkl"),
     )
     start = time.perf_counter()
     try:

@@ -162,7 +162,8 @@ def seed_results(folder: Path, threshold: float | None) -> list[dict[str, Any]]:
     :return: Per seed: steps, wall-clock, final and best return, and where the threshold was first reached.
     """
     results = []
-    for summary_path in sorted(folder.glob("logs/*/*_seed*/summary.json")):
+    paths = folder.glob("logs/*/*_seed*/summary.json")
+    for summary_path in sorted(paths, key=lambda path: int(path.parent.name.rsplit("_seed", 1)[1])):
         summary = json.loads(summary_path.read_text())
         evaluations = np.load(summary_path.parent / "evaluations.npz")
         means = [float(np.mean(r)) for r in evaluations["results"]]
@@ -191,6 +192,27 @@ def seed_results(folder: Path, threshold: float | None) -> list[dict[str, Any]]:
     return results
 
 
+#: The settings of a run that its figures depend on: seeds run with different ones are reported apart.
+RUN_SETTINGS = ("budget_steps", "budget_seconds", "eval_freq", "eval_episodes", "eval_envs")
+
+
+def settings_groups(results: list[dict[str, Any]]) -> list[list[dict[str, Any]]]:
+    """
+    :param results: Seed results (:func:`seed_results`).
+    :return: The results grouped by their :data:`RUN_SETTINGS` (e.g. a seed run again with another budget), in order.
+    """
+    groups: dict[tuple[Any, ...], list[dict[str, Any]]] = {}
+    for r in results:
+        groups.setdefault(tuple(r[key] for key in RUN_SETTINGS), []).append(r)
+    return list(groups.values())
+
+
+def budget_text(r: dict[str, Any]) -> str:
+    """:return: A run's budget, e.g. ``2,000,000 steps or 150 s``."""
+    budget = f"{r['budget_steps']:,} steps"
+    return budget + (f" or {r['budget_seconds']:g} s" if r["budget_seconds"] else "")
+
+
 def table(rows: list[tuple[str, str, float | None, list[dict[str, Any]]]]) -> str:
     """
     :param rows: ``(algo, env_id, threshold, seed results)`` per entry.
@@ -206,9 +228,12 @@ def table(rows: list[tuple[str, str, float | None, list[dict[str, Any]]]]) -> st
         if not results:
             lines.append(f"| {algo} | {env_id} | {shown} | | | | not run | | |")
             continue
-        budget = f"{results[0]['budget_steps']:,} steps"
-        if results[0]["budget_seconds"]:
-            budget += f" or {results[0]['budget_seconds']:g} s"
+        groups = settings_groups(results)
+        budget = (
+            budget_text(results[0])
+            if len(groups) == 1
+            else "; ".join(f"{budget_text(g[0])} ({', '.join('s' + str(r['seed']) for r in g)})" for g in groups)
+        )
         outcome = []
         for r in results:
             if r["hit_steps"] is not None:
@@ -230,12 +255,20 @@ def table(rows: list[tuple[str, str, float | None, list[dict[str, Any]]]]) -> st
 
 def comment(algo: str, env_id: str, threshold: float | None, results: list[dict[str, Any]], n_timesteps: int) -> str:
     """
-    The YAML comment lines that state an entry's measured result and the command that reproduces it.
+    The YAML comment lines that state an entry's measured result and the command that reproduces it: one statement
+    and command per group of seeds run with the same settings (:func:`settings_groups`).
 
     :param results: The entry's seed results (:func:`seed_results`).
     :param n_timesteps: The entry's ``n_timesteps``.
     :return: ``# ``-prefixed lines.
     """
+    return "\n".join(group_comment(algo, env_id, threshold, group, n_timesteps) for group in settings_groups(results))
+
+
+def group_comment(
+    algo: str, env_id: str, threshold: float | None, results: list[dict[str, Any]], n_timesteps: int
+) -> str:
+    """:func:`comment` for seeds run with the same settings."""
     first = results[0]
     commits = sorted({r["commit"] or "commit not recorded" for r in results})
     budget = f"at most {first['budget_steps']:,} steps"

@@ -76,3 +76,18 @@ def test_threshold_of_a_dm_control_env_without_one_is_none() -> None:
     threshold_for = load_script("verify_configs").threshold_for
     assert threshold_for("dm_control/cheetah-run-v0", {}) is None
     assert threshold_for("dm_control/cheetah-run-v0", {"dm_control/cheetah-run-v0": 700.0}) == 700.0
+
+
+def test_seeds_run_with_other_settings_are_reported_apart() -> None:
+    """A seed run again with another budget (``--skip-existing`` keeps the others) gets its own statement and
+    command, and the table row names each budget with its seeds, instead of seed 0's budget for every seed."""
+    script = load_script("verify_configs")
+    longer = [{**result(seed, None), "budget_seconds": 900.0, "seconds": 734.0} for seed in (1, 2)]
+    text = script.comment("ars_es", "Hopper-v5", 300.0, [result(0, 800_000), *longer], n_timesteps=7_000_000)
+    commands = [line for line in text.splitlines() if line.startswith("#   python")]
+    assert [command.split("--seeds ")[1].split(" --")[0] for command in commands] == ["0", "1 2"]
+    assert "--max-seconds 150" in commands[0] and "--max-seconds 900" in commands[1]
+    joined = " ".join(line.lstrip("# ") for line in text.splitlines())
+    assert "or 900 s of training" in joined and "(1,200,000 steps, 734 s)" in joined
+    row = script.table([("ars_es", "Hopper-v5", 300.0, [result(0, 800_000), *longer])]).splitlines()[-1]
+    assert "| 2,000,000 steps or 150 s (s0); 2,000,000 steps or 900 s (s1, s2) |" in row

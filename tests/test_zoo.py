@@ -668,6 +668,41 @@ def test_compare_confirms_a_threshold_before_stopping(tmp_path: Path) -> None:
     assert "1/1 seeds; confirmed on 3 episodes" in text
     with pytest.raises(SystemExit, match="add it, with --threshold"):
         compare.main(["--algos", "ars_es", "--steps", "10", "--confirm-episodes", "3", "--out", str(out)])
+    # An evaluation at which the time budget runs out is confirmed too (it used to end the run unconfirmed: a miss).
+    out = tmp_path / "cmp_budget"
+    compare.main(
+        ["--algos", "ars_es", "--envs", "Pendulum-v1", "--seconds", "0.000001", "--eval-freq", "0", "--out", str(out)]
+        + ["--eval-episodes", "2", "--threshold", "Pendulum-v1=-2000", "--stop-at-threshold"]
+        + ["--confirm-episodes", "3", "--eval-envs", "2"]
+    )
+    summary = json.loads((out / "logs" / "ars_es" / "Pendulum-v1_1_seed0" / "summary.json").read_text())
+    assert (
+        len(summary["confirmations"]) == 1 and "1/1 seeds; confirmed on 3 episodes" in (out / "results.md").read_text()
+    )
+
+
+def test_compare_saves_the_vecnormalize_statistics_with_each_checkpoint(tmp_path: Path) -> None:
+    """``last_model.zip`` comes with the training env's VecNormalize statistics where rl-zoo reads them back, so
+    that ``--continue-from`` a run stopped before its end (rl-zoo writes them only at the end) keeps them."""
+    from stable_baselines3.common.env_util import make_vec_env
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    compare = load_script("compare")
+    env = VecNormalize(make_vec_env("Pendulum-v1", n_envs=2))
+    model = ARS("LinearPolicy", env, n_delta=2, seed=0, policy_kwargs=dict(normalize_observations=False))
+    path = tmp_path / "Pendulum-v1" / "vecnormalize.pkl"
+    recorder = compare.RecordingEvalCallback(
+        VecNormalize(make_vec_env("Pendulum-v1", n_envs=1), training=False),
+        eval_freq=400,
+        n_eval_episodes=1,
+        log_path=str(tmp_path),
+        budget_seconds=None,
+        progress=compare.Progress("test", None, None),
+        vecnormalize_path=str(path),
+    )
+    model.learn(800, callback=recorder)
+    saved = VecNormalize.load(str(path), make_vec_env("Pendulum-v1", n_envs=2))
+    assert (tmp_path / "last_model.zip").is_file() and saved.obs_rms.count == env.obs_rms.count > 800
 
 
 def test_compare_train_wrapper_wraps_the_training_envs_only(tmp_path: Path) -> None:
