@@ -572,6 +572,7 @@ def run_one(
         "eval_envs": eval_envs,
         "continued_from": {"model": str(continue_from), "env_steps": offset} if continue_from is not None else None,
         "train_wrapper": train_wrapper,
+        "stop_at": stop_at,
         "confirm_episodes": recorder.confirm_episodes if stop_at is not None else 0,
         "confirmations": recorder.confirmations,
         "hyperparams_source": note,
@@ -706,9 +707,13 @@ def time_to_threshold(runs: list[dict[str, Any]], threshold: float) -> str:
     :return: Table cell, seeds in order, e.g. ``1,959 s median (1,959 / >2,700 / 1,028 s; 2/3 seeds)``.
     """
     per_seed = []  # (seconds, censored) in seed order; censored: never reached, the seconds are its budget
-    confirmed = sorted({int(run.get("confirm_episodes") or 0) for run in runs})
+    # A run confirmed against another threshold (its stop_at) counts its evaluations: its confirmations say nothing
+    # about this one.
+    other = [run for run in runs if run.get("confirm_episodes") and run.get("stop_at", threshold) != threshold]
+    confirmed = sorted({int(run.get("confirm_episodes") or 0) for run in runs if not any(run is o for o in other)})
     for run in sorted(runs, key=lambda r: r["seed"]):
-        rows = run["confirmations"] if run.get("confirm_episodes") else run["rows"]
+        use_confirmations = run.get("confirm_episodes") and not any(run is o for o in other)
+        rows = run["confirmations"] if use_confirmations else run["rows"]
         hit = next((r for r in rows if r["mean_return"] >= threshold), None)
         if hit is None:
             # its wall-clock budget, also when it stopped earlier at its step budget (it never reached the threshold)
@@ -721,7 +726,9 @@ def time_to_threshold(runs: list[dict[str, Any]], threshold: float) -> str:
     middle = order[(len(order) - 1) // 2 : len(order) // 2 + 1]  # one entry (odd count) or two (even)
     prefix = ">" if any(censored for _, censored in middle) else ""  # a budget in the median: a lower bound
     median = float(np.mean([seconds for seconds, _ in middle]))
-    note = f"; confirmed on {' or '.join(map(str, confirmed))} episodes" if confirmed != [0] else ""
+    note = f"; confirmed on {' or '.join(map(str, confirmed))} episodes" if confirmed not in ([0], []) else ""
+    for run in other:
+        note += f"; s{run['seed']} confirmed at {run['stop_at']:g}, so its evaluations count"
     return f"{prefix}{median:,.0f} s median ({cells} s; {reached}/{len(runs)} seeds{note})"
 
 
@@ -888,10 +895,16 @@ def check_run_arguments(args: argparse.Namespace, thresholds: dict[str, float], 
         problems.append(f"--algos {missing}: unknown or unavailable (known: {sorted(rl_zoo3.ALGOS)})")
     if args.continue_from is not None:
         # A run folder of this script, <algo>/<env>_1_seed<s>, names the env the model was trained on.
-        trained = re.fullmatch(r"(.+)_\d+_seed\d+", args.continue_from.parent.name)
+        trained = re.fullmatch(r"(.+)_\d+_seed(\d+)", args.continue_from.parent.name)
         if trained and trained.group(1) not in [env_slug(env_id) for env_id in args.envs]:
             problems.append(
                 f"--continue-from {args.continue_from} was trained on {trained.group(1)}, not on --envs {args.envs}"
+            )
+        if trained and len(args.seeds) == 1 and int(trained.group(2)) != args.seeds[0]:
+            problems.append(
+                f"--continue-from {args.continue_from} was trained with seed {trained.group(2)}, not --seeds "
+                f"{' '.join(map(str, args.seeds))}: a continued run goes on with its own seed ('--seeds "
+                f"{trained.group(2)}'), or would be reported as another seed"
             )
     if problems:
         raise SystemExit("compare.py: " + "; ".join(problems) + ".")

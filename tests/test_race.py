@@ -60,6 +60,10 @@ def test_a_confirmed_race_counts_the_first_confirmation(time_to_threshold: Any) 
     second.update(confirm_episodes=100, confirmations=[{"wall_s": 900.0, "mean_return": 280.0}])
     cell = time_to_threshold([first, second], 300.0)
     assert cell == ">950 s median (700 / >1,200 s; 1/2 seeds; confirmed on 100 episodes)"
+    # Reported at another threshold than the one the run confirmed (recorded as stop_at): its evaluations count.
+    first["stop_at"] = 300.0
+    cell = time_to_threshold([first], 250.0)
+    assert cell == "500 s median (500 s; 1/1 seeds; s0 confirmed at 300, so its evaluations count)"
 
 
 def test_overrides_read_yaml_values_and_exponent_numbers() -> None:
@@ -126,6 +130,10 @@ def test_a_run_continues_from_its_last_model(tmp_path: Any) -> None:
         (
             ["--steps", "100", "--continue-from", "r/logs/ars_es/Pendulum-v1_1_seed0/last_model.zip"],
             r"was trained on Pendulum-v1, not on --envs \['CartPole-v1'\]",
+        ),
+        (
+            ["--steps", "100", "--seeds", "1", "--continue-from", "r/logs/ars_es/CartPole-v1_1_seed0/last_model.zip"],
+            r"was trained with seed 0, not --seeds 1: a continued run goes on with its own seed",
         ),
     ],
 )
