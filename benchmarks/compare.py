@@ -392,7 +392,7 @@ class RecordingEvalCallback(EvalCallback):
         )
         return mean >= self.stop_at
 
-    def _reached(self) -> bool:
+    def _check_threshold(self) -> bool:
         """:return: Whether a new evaluation reached ``stop_at`` (and, with ``confirm_episodes``, was confirmed)."""
         if self.stop_at is None or len(self.train_s) <= self._checked:
             return False
@@ -404,7 +404,7 @@ class RecordingEvalCallback(EvalCallback):
         continue_training = self._evaluate() if self._grid_point_due() else True
         train_s = self.train_seconds()
         self.progress.update(self.num_timesteps, train_s, self.last_mean_reward if self.train_s else None)
-        if self._reached():  # checked first: an evaluation at the end of the time budget counts too
+        if self._check_threshold():  # checked first: an evaluation at the end of the time budget counts too
             return False
         if self.budget_seconds is not None and train_s >= self.budget_seconds:
             return False
@@ -414,7 +414,7 @@ class RecordingEvalCallback(EvalCallback):
         if not self.evaluations_timesteps or self.evaluations_timesteps[-1] != self.num_timesteps:
             self._evaluate()
         if not self.reached:
-            self._reached()  # the final evaluation is confirmed too (with confirm_episodes), as the grid ones are
+            self._check_threshold()  # the final evaluation is confirmed too, as the grid ones are
         self.progress.update(self.num_timesteps, self.train_seconds(), self.last_mean_reward, force=True)
         super()._on_training_end()
 
@@ -710,9 +710,10 @@ def time_to_threshold(runs: list[dict[str, Any]], threshold: float) -> str:
     # A run confirmed against another threshold (its stop_at) counts its evaluations: its confirmations say nothing
     # about this one.
     other = [run for run in runs if run.get("confirm_episodes") and run.get("stop_at", threshold) != threshold]
-    confirmed = sorted({int(run.get("confirm_episodes") or 0) for run in runs if not any(run is o for o in other)})
+    other_ids = {id(run) for run in other}
+    confirmed = sorted({int(run.get("confirm_episodes") or 0) for run in runs if id(run) not in other_ids})
     for run in sorted(runs, key=lambda r: r["seed"]):
-        use_confirmations = run.get("confirm_episodes") and not any(run is o for o in other)
+        use_confirmations = run.get("confirm_episodes") and id(run) not in other_ids
         rows = run["confirmations"] if use_confirmations else run["rows"]
         hit = next((r for r in rows if r["mean_return"] >= threshold), None)
         if hit is None:

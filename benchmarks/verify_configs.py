@@ -162,8 +162,7 @@ def seed_results(folder: Path, threshold: float | None) -> list[dict[str, Any]]:
     :return: Per seed: steps, wall-clock, final and best return, and where the threshold was first reached.
     """
     results = []
-    paths = folder.glob("logs/*/*_seed*/summary.json")
-    for summary_path in sorted(paths, key=lambda path: int(path.parent.name.rsplit("_seed", 1)[1])):
+    for summary_path in sorted(folder.glob("logs/*/*_seed*/summary.json")):
         summary = json.loads(summary_path.read_text())
         evaluations = np.load(summary_path.parent / "evaluations.npz")
         means = [float(np.mean(r)) for r in evaluations["results"]]
@@ -189,7 +188,7 @@ def seed_results(folder: Path, threshold: float | None) -> list[dict[str, Any]]:
                 "hardware": summary["hardware"],
             }
         )
-    return results
+    return sorted(results, key=lambda r: r["seed"])  # by number: the folder names put seed 10 before seed 2
 
 
 #: The settings of a run that its figures depend on: seeds run with different ones are reported apart.

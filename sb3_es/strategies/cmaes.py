@@ -146,12 +146,13 @@ class CMAESStrategy(Strategy):
 
     def _check_cma_options(self) -> None:
         """Refuse a string that pycma could not read as the number an option needs: pycma keeps it and fails later."""
+        unread = {key: value for key, value in self.cma_options.items() if isinstance(self.es.opts.get(key), str)}
+        if not unread:  # the usual case: nothing more to build
+            return
         cma = _import_cma()
         defaults = cma.CMAOptions(cma.CMAOptions().defaults())
         names = {"N": self.num_params, "dim": self.num_params, "popsize": self.base_population_size}
-        for key, value in self.cma_options.items():
-            if not isinstance(self.es.opts.get(key), str):
-                continue
+        for key, value in unread.items():
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 try:
