@@ -263,8 +263,10 @@ def test_faults(host: str, tmp_path: Path, caplog: pytest.LogCaptureFixture, mon
     with make_evaluator(host, crashing_env, num_workers=2) as evaluator:
         # One worker's process dies mid-generation: it is replaced and its share re-run. The replacement takes
         # a while to start (here 1 s more); the worker that is done stops lingering meanwhile, or its center-policy
-        # steps (thousands per second on ToyEnv) would all count. A dead worker process is seen at once (its
-        # sentinel); a dead Ray actor only when its raylet notices, so the bound is checked on processes.
+        # steps (tens of thousands per second on ToyEnv) would all count. The bound is on the time spent lingering,
+        # half the replacement's start-up, since a step count would measure the driver's scheduling delay on a busy
+        # machine. A dead worker process is seen at once (its sentinel); a dead Ray actor only when its raylet
+        # notices, the others lingering till then, so the bound is checked on processes.
         replace = evaluator.pool.replace
 
         def slow_replace(k: int) -> None:
@@ -279,8 +281,8 @@ def test_faults(host: str, tmp_path: Path, caplog: pytest.LogCaptureFixture, mon
         assert evaluator.restarted_workers == 1
         assert any("died" in record.getMessage() for record in caplog.records)
         assert_same_candidates(result, local)
-        if host == "processes":  # Ray reports a dead actor only once its raylet notices, the others lingering till then
-            assert result.n_steps < 20 * local.n_steps, (result.n_steps, local.n_steps)
+        if host == "processes":
+            assert sum(evaluator.last_timings["linger_times"]) < 0.5, evaluator.last_timings
 
         # A worker killed between generations is replaced too.
         kill_worker(evaluator, 1)
