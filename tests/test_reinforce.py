@@ -24,6 +24,7 @@ from stable_baselines3.common.policies import ActorCriticPolicy
 from stable_baselines3.common.vec_env import DummyVecEnv
 
 from sb3_es.reinforce import REINFORCE, DiscretizedPolicy, MlpPolicy
+from sb3_es.reinforce.episodes import EpisodeCollector
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
@@ -72,6 +73,14 @@ def test_joint_discretization_matches_product_grid() -> None:
     actions = policy.indices_to_actions(th.arange(81)).numpy()
     expected = np.array(list(itertools.product([-1.0, 0.0, 1.0], repeat=4)), dtype=np.float32)
     np.testing.assert_array_equal(actions, expected)
+
+
+def test_integer_box_levels_are_the_nearest_distinct_integers() -> None:
+    action_space = spaces.Box(np.array([0, -2]), np.array([10, 2]), dtype=np.int64)
+    policy = DiscretizedPolicy(spaces.Box(-1, 1, (3,)), action_space, lambda _: 1e-3, n_bins=4)
+    assert policy.action_levels.tolist() == [[0, 3, 7, 10], [-2, -1, 1, 2]]  # truncation gave [-2, 0, 0, 2]
+    with pytest.raises(ValueError, match=r"n_bins=6 levels do not fit .* at most high - low \+ 1 .* \(5\)"):
+        DiscretizedPolicy(spaces.Box(-1, 1, (3,)), action_space, lambda _: 1e-3, n_bins=6)
 
 
 def test_factorized_discretization_and_actions_on_grid() -> None:
@@ -302,6 +311,20 @@ def test_nan_reward_refused_naming_step_and_episode(use_baseline: bool) -> None:
     # The first update was applied, the second refused: the weights are finite, those of one update.
     assert model._n_updates == 1
     assert_identical(policy_state(model), policy_state(reference))
+
+
+@pytest.mark.parametrize("discarded_reward", [float("nan"), float("inf")])
+def test_a_non_finite_reward_in_a_discarded_episode_leaves_the_kept_returns(discarded_reward: float) -> None:
+    """Slot 0 ends its kept episode at step 2, then plays a discarded one while slot 1 ends its kept episode."""
+    returns = []
+    for reward in (1.0, discarded_reward):
+        collector = EpisodeCollector(n_episodes=2, n_envs=2)
+        steps = [([1.0, 1.0], [False, False]), ([1.0, 1.0], [True, False]), ([reward, 1.0], [False, True])]
+        for rewards, dones in steps:
+            collector.add(np.zeros((2, 1)), np.zeros(2, dtype=int), np.array(rewards), np.array(dones), [{}, {}])
+        returns.append(collector.batch(0.5, update=1).returns)
+    np.testing.assert_array_equal(returns[1], returns[0])
+    np.testing.assert_array_equal(returns[0], [1.5, 1.75, 1.0, 1.5, 1.0])
 
 
 @pytest.mark.parametrize("env_id", ["CartPole-v1", "Pendulum-v1"])

@@ -121,10 +121,12 @@ class EpisodeCollector:
         """
         rewards, dones, keep = np.stack(self._rewards), np.stack(self._dones), np.stack(self._keep)
         check_rewards(rewards, dones, keep, update)
+        # The discarded steps (unchecked, possibly non-finite) take no part: a 0 * nan would carry into a kept episode.
+        rewards = np.where(keep, rewards, 0.0)
         returns = np.zeros_like(rewards)
         running = np.zeros(rewards.shape[1])
         for t in reversed(range(len(rewards))):
-            running = rewards[t] + gamma * running * (1.0 - dones[t])
+            running = rewards[t] + gamma * np.where(dones[t], 0.0, running)
             returns[t] = running
         if isinstance(self._obs[0], dict):
             observations: np.ndarray | dict[str, np.ndarray] = {

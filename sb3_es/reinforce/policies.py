@@ -82,7 +82,8 @@ class DiscretizedPolicy(ActorCriticPolicy):
     :param action_space: ``Box`` with finite bounds (discretized) or ``Discrete``.
     :param lr_schedule: Learning rate schedule; the optimizer starts with ``lr_schedule(1)``.
     :param n_bins: Number of evenly spaced levels per ``Box`` dimension, ``low`` and ``high`` included
-        (``None``: 3). ``Discrete`` actions are used as they are: another ``n_bins``, or ``joint=True``, is refused.
+        (``None``: 3; rounded to the nearest integers on an integer ``Box``). ``Discrete`` actions are used as they
+        are: another ``n_bins``, or ``joint=True``, is refused.
     :param joint: ``True``: one categorical over the ``n_bins ** action_dim`` combinations of levels;
         ``False``: an independent categorical per dimension.
     :param max_joint_actions: Largest number of joint actions accepted when ``joint=True``.
@@ -171,7 +172,16 @@ class DiscretizedPolicy(ActorCriticPolicy):
             low = action_space.low.reshape(-1).astype(np.float64)
             high = action_space.high.reshape(-1).astype(np.float64)
             # linspace puts low and high exactly on the grid: actions never leave the Box.
-            levels = np.linspace(low, high, self.n_bins, axis=1).astype(action_space.dtype)
+            levels = np.linspace(low, high, self.n_bins, axis=1)
+            if np.issubdtype(action_space.dtype, np.integer):  # the nearest integers, each level a distinct action
+                levels = np.rint(levels)
+                if np.any(np.diff(levels, axis=1) == 0):
+                    raise ValueError(
+                        f"n_bins={self.n_bins} levels do not fit in the integer action space {action_space}: two "
+                        "levels round to the same action. Use n_bins at most high - low + 1 of its narrowest "
+                        f"dimension ({int(np.min(high - low)) + 1})."
+                    )
+            levels = levels.astype(action_space.dtype)
         else:
             levels = np.zeros((0, self.n_bins), dtype=np.float32)
         # Level values, (action_dim, n_bins): derived from the action space, so not saved in the state dict.
