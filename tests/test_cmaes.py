@@ -6,6 +6,7 @@ What every algorithm does (learning, step accounting, callbacks, logging) is in 
 
 from __future__ import annotations
 
+import copy
 import math
 import warnings
 from pathlib import Path
@@ -268,6 +269,45 @@ def test_ipop_runs_max_restarts_restarts(max_restarts: int) -> None:
     assert model.strategy.stopped
     # The first run plus max_restarts restarted runs, each stopping after one generation.
     assert [size for size, _ in asked] == [10 * 2**k for k in range(max_restarts + 1)]
+
+
+def test_a_model_out_of_restarts_searches_on_when_loaded_with_more(tmp_path: Path) -> None:
+    model = CMAES("LinearPolicy", "CartPole-v1", seed=0, restarts="ipop", max_restarts=1, cma_options=QUICK_STOP)
+    with pytest.warns(UserWarning, match=r"All max_restarts=1 restarts have run; .*CMAES.load\(path, max_restarts="):
+        model.learn(100_000)
+    assert model.strategy.stopped and model.strategy.n_restarts == 1
+    model.save(tmp_path / "model.zip")
+    loaded = CMAES.load(tmp_path / "model.zip", env=make_vec_env("CartPole-v1"), max_restarts=3)
+    assert not loaded.strategy.stopped
+    asked = spy_on_population_sizes(loaded)
+    with pytest.warns(UserWarning, match="All max_restarts=3 restarts have run"):
+        loaded.learn(100_000, reset_num_timesteps=False)
+    # The stopped run is restarted at the next generation: two more restarts, each doubling the population.
+    assert loaded.strategy.n_restarts == 3
+    assert [size for size, _ in asked] == [40, 80]
+
+
+def test_without_restarts_the_stop_warning_names_restarts() -> None:
+    model = CMAES("LinearPolicy", "CartPole-v1", seed=0, cma_options=QUICK_STOP)
+    with pytest.warns(UserWarning, match=r"To keep searching, train with restarts='ipop' or 'bipop'"):
+        model.learn(100_000)
+    with pytest.warns(UserWarning, match=r"CMA-ES has stopped .*; learn\(\) does nothing. To keep searching"):
+        model.learn(1_000)
+    # Weights written into the policy start a new pycma run from them.
+    steps = model.num_timesteps
+    model.policy.load_from_vector(model.best_params + 0.01)
+    with pytest.warns(UserWarning, match="CMA-ES stop conditions fired"):
+        model.learn(1_000, reset_num_timesteps=False)
+    assert model.num_timesteps > steps and model.strategy.es.countiter == 1
+
+
+def test_a_copy_taken_between_ask_and_tell_can_tell() -> None:
+    strategy = CMAESStrategy(np.zeros(5), sigma=0.5, population_size=6, seed=0)
+    strategy.ask()
+    copied = copy.deepcopy(strategy)
+    strategy.tell(np.arange(6.0))
+    copied.tell(np.arange(6.0))
+    np.testing.assert_array_equal(copied.center, strategy.center)
 
 
 def test_center_follows_a_restart() -> None:

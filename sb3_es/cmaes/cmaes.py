@@ -117,11 +117,23 @@ class CMAES(PopulationAlgorithm):
             seed=seed,
         )
 
+    def _keep_searching(self) -> str:
+        """:return: How to keep searching once the stop conditions fired with no restart left."""
+        if self.restarts is None:
+            return (
+                "To keep searching, train with restarts='ipop' or 'bipop', or relax the stop conditions with "
+                "cma_options."
+            )
+        return (
+            f"All max_restarts={self.max_restarts} restarts have run; to keep searching, save the model and load it "
+            "with a larger max_restarts (CMAES.load(path, max_restarts=...)), then learn() again."
+        )
+
     def _run_generation(self, evaluator, callback) -> bool:  # type: ignore[no-untyped-def]
+        self._follow_policy_weights(self.strategy)  # weights written into the policy start a new pycma run
         if self.strategy.stopped:
             warnings.warn(
-                f"CMA-ES has stopped ({self.strategy.last_stop}); learn() does nothing. Pass restarts='ipop' or "
-                "'bipop', or relax the stop conditions with cma_options, to keep searching.",
+                f"CMA-ES has stopped ({self.strategy.last_stop}); learn() does nothing. {self._keep_searching()}",
                 stacklevel=2,
             )
             return False
@@ -132,8 +144,7 @@ class CMAES(PopulationAlgorithm):
             if self.strategy.stopped:  # a warning, not a print: learn() returns before total_timesteps
                 warnings.warn(
                     f"CMA-ES stop conditions fired ({self.strategy.last_stop}) at {self.num_timesteps} env steps; "
-                    "training ends before total_timesteps. Pass restarts='ipop' or 'bipop', or relax the stop "
-                    "conditions with cma_options, to keep searching.",
+                    f"training ends before total_timesteps. {self._keep_searching()}",
                     stacklevel=2,
                 )
                 self._stop_training = True

@@ -213,7 +213,13 @@ class CMAESStrategy(Strategy):
         """:return: Current overall step size."""
         return float(self.es.sigma)
 
+    def _restart_left(self) -> bool:
+        return self.restarts is not None and self.n_restarts < self.max_restarts
+
     def _ask(self) -> np.ndarray:
+        if self._exhausted and self._restart_left():  # stopped with no restart left; max_restarts was raised since
+            self._exhausted = False
+            self._restart()
         with self._private_random():
             self._solutions = self.es.ask()
         return np.asarray(self._solutions, dtype=np.float64)
@@ -226,7 +232,7 @@ class CMAESStrategy(Strategy):
         self.center = np.asarray(self.es.mean, dtype=np.float64).copy()
         stats = {"sigma": self.sigma, "population_size": float(self.population_size), "restarts": self.n_restarts}
         self.last_stop = dict(self.es.stop())
-        restart = bool(self.last_stop) and self.restarts is not None and self.n_restarts < self.max_restarts
+        restart = bool(self.last_stop) and self._restart_left()
         self._exhausted = bool(self.last_stop) and not restart
         if restart:
             self._restart()
@@ -234,8 +240,8 @@ class CMAESStrategy(Strategy):
 
     @property
     def stopped(self) -> bool:
-        """:return: Whether pycma's stop conditions fired and no restart was left to run."""
-        return self._exhausted
+        """:return: Whether pycma's stop conditions fired and no restart is left to run."""
+        return self._exhausted and not self._restart_left()
 
     def _restart(self) -> None:
         """Start a new pycma run from the best candidate found, with the population size of the restart scheme."""
@@ -258,9 +264,13 @@ class CMAESStrategy(Strategy):
         self.center = np.asarray(self.es.mean, dtype=np.float64).copy()
 
     def set_center(self, center: np.ndarray) -> None:
+        """A new pycma run from ``center`` with the current step size and population size (the covariance, the
+        evolution paths and the stop conditions start afresh)."""
         super().set_center(center)
         self.es = self._new_es(self.center, self.sigma, self.population_size)
+        self._exhausted = False
 
     def __setstate__(self, state: dict[str, Any]) -> None:
-        state.setdefault("_solutions", state.pop("_asked", None))  # renamed in version 2
+        if "_solutions" not in state:  # before version 2, pycma's list was "_asked" (now the base class's own)
+            state["_solutions"] = state.pop("_asked", None)
         super().__setstate__(state)
