@@ -244,6 +244,15 @@ def test_evaluator_processes_from_envs_registered_with_a_partial() -> None:
         del gym.registry["PartialPendulum-v0"]
 
 
+def test_load_and_set_env_refuse_an_env_the_workers_cannot_rebuild(tmp_path: Path) -> None:
+    ARS("LinearPolicy", ToyEnv(), n_delta=2).save(tmp_path / "model.zip")
+    with pytest.raises(ValueError, match="evaluator='processes': .*not built by gym.make"):  # at load, not at learn
+        ARS.load(tmp_path / "model.zip", env=ToyEnv(), evaluator="processes")
+    model = ARS("LinearPolicy", "Pendulum-v1", n_delta=2, evaluator="processes")
+    with pytest.raises(ValueError, match="not built by gym.make"):
+        model.set_env(DummyVecEnv([lambda: gym.wrappers.TimeLimit(ToyEnv(), 50)]))
+
+
 def test_set_env_rebuilds_the_workers_from_the_new_env(monkeypatch: pytest.MonkeyPatch) -> None:
     """After ``set_env()`` the workers run the new env (rebuilt from its specs), not the env id of the constructor."""
     monkeypatch.setattr(processes, "usable_cpus", lambda: 2)

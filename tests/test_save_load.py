@@ -380,6 +380,35 @@ def test_load_a_save_with_another_algorithm(saved: Saved) -> None:
                 other.cls.load(path)
 
 
+def test_a_subclass_loads_its_algorithms_saves_and_the_algorithm_its_subclass_saves(
+    saved: Saved, tmp_path: Path
+) -> None:
+    algo, model, path = saved
+    subclass = type(f"My{algo.cls.__name__}", (algo.cls,), {})  # as a user customizes an algorithm
+    loaded = subclass.load(path)
+    assert type(loaded) is subclass
+    assert_identical(policy_state(loaded), policy_state(model))
+    loaded.save(tmp_path / "subclass.zip")
+    assert_identical(policy_state(algo.cls.load(tmp_path / "subclass.zip")), policy_state(model))
+    loaded.set_parameters(path)
+
+
+def test_load_names_a_module_that_cannot_be_imported(saved: Saved, tmp_path: Path) -> None:
+    """A save whose objects come from a module missing here (a custom activation, say) is not called corrupt."""
+    algo, _, path = saved
+    with zipfile.ZipFile(path) as source, zipfile.ZipFile(tmp_path / "model.zip", "w") as target:
+        for item in source.infolist():
+            content = source.read(item.filename)
+            if item.filename == "data":  # an object whose pickle names a class of a module that does not exist
+                pickled = base64.b64encode(b"csb3_es_missing_module\nThing\n.")
+                content = content.replace(b"{", b'{"thing": {":type:": "", ":serialized:": "' + pickled + b'"}, ', 1)
+            target.writestr(item, content)
+    with pytest.raises(
+        ValueError, match=r"module 'sb3_es_missing_module', which cannot be imported here .*custom_objects"
+    ):
+        algo.cls.load(tmp_path / "model.zip")
+
+
 # ---------------------------------------------------------------------------- files from older versions
 LEGACY_DIR = Path(__file__).resolve().parent / "data" / "legacy"
 

@@ -22,7 +22,7 @@ from stable_baselines3.common.utils import ConstantSchedule, LinearSchedule
 from stable_baselines3.common.vec_env import VecEnv
 
 from sb3_es.common.checks import check_policy_kwargs, check_positive, check_seed
-from sb3_es.common.save_util import check_save_file
+from sb3_es.common.save_util import algorithm_name, check_save_file
 from sb3_es.evaluation.time_limit import env_time_limit
 from sb3_es.strategies.base import check_count, parse_number
 
@@ -173,7 +173,7 @@ class ESBaseAlgorithm(BaseAlgorithm):
             support_multi_env=True,
             seed=seed,
         )
-        self._algorithm_name = type(self).__name__
+        self._algorithm_name = algorithm_name(type(self))
         self._check_episode_cap()  # now, not at learn()
 
     def _excluded_save_params(self) -> list[str]:
@@ -275,7 +275,7 @@ class ESBaseAlgorithm(BaseAlgorithm):
         if isinstance(load_path_or_dict, dict):
             params: dict[str, Any] = load_path_or_dict
         else:
-            _, params = check_save_file(load_path_or_dict, type(self).__name__, method="set_parameters")
+            _, params = check_save_file(load_path_or_dict, type(self), method="set_parameters")
         super().set_parameters(self._upgrade_saved_params(params), exact_match=exact_match, device=device)
 
     def _upgrade_saved_params(self, params: dict[str, Any]) -> dict[str, Any]:
@@ -315,7 +315,7 @@ class ESBaseAlgorithm(BaseAlgorithm):
             from the next update on.
         :return: The loaded model.
         """
-        data, _ = check_save_file(path, cls.__name__, custom_objects)
+        data, _ = check_save_file(path, cls, custom_objects)
         cls._check_save_data(path, data)
         signature = inspect.signature(cls.__init__).parameters
         kwargs = {

@@ -160,6 +160,10 @@ class PopulationAlgorithm(StrategyAlgorithm):
     def _check_env(self, env: VecEnv | None = None) -> None:
         super()._check_env(env)
         self._check_common_seeds(env)
+        if isinstance(self.evaluator, str) and self.evaluator != "local":  # the workers can rebuild the env
+            env_id, env = (None, env) if env is not None else (getattr(self, "_env_id", None), self.env)
+            if env is not None or env_id is not None:
+                check_evaluator(self.evaluator, env_id, env)
 
     @classmethod
     def _check_live_values(cls, values: dict[str, Any]) -> None:
@@ -195,11 +199,8 @@ class PopulationAlgorithm(StrategyAlgorithm):
         :param force_reset: Reset the env before the next ``learn()``.
         """
         env = self._wrap_env(env, self.verbose)
-        building_workers = isinstance(self.evaluator, str) and self.evaluator != "local"
-        if building_workers:
-            check_evaluator(self.evaluator, None, env)  # before anything changes: the workers can rebuild the env
-        super().set_env(env, force_reset)
-        if building_workers:
+        super().set_env(env, force_reset)  # checks that the workers can rebuild the env, before anything changes
+        if isinstance(self.evaluator, str) and self.evaluator != "local":
             self._env_id = None
             if self._evaluator is not None:
                 self._evaluator.close()

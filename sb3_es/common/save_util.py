@@ -37,7 +37,7 @@ def guess_foreign_algorithm(data: dict[str, Any]) -> str:
 
 def check_save_file(
     path: str | pathlib.Path | io.BufferedIOBase,
-    algorithm: str,
+    algorithm: type,
     custom_objects: dict[str, Any] | None = None,
     method: str = "load",
 ) -> tuple[dict[str, Any], dict[str, Any]]:
@@ -45,7 +45,8 @@ def check_save_file(
     Check that ``path`` is a readable sb3-es save of ``algorithm`` before SB3 loads it.
 
     :param path: File or file-like object given to ``load()`` or ``set_parameters()``.
-    :param algorithm: Name of the class that loads it.
+    :param algorithm: The class that loads it (it loads the saves of its sb3-es base classes, and those of its
+        subclasses, which save under their sb3-es algorithm's name).
     :param custom_objects: Objects replacing saved ones (as in SB3's ``load``): they are not deserialized.
     :param method: ``"load"`` or ``"set_parameters"``, for the error messages.
     :return: The save's data dictionary and its parameters (state dicts on the CPU).
@@ -66,6 +67,12 @@ def check_save_file(
     ) as e:
         if isinstance(e, FileNotFoundError):
             raise
+        if isinstance(e, ModuleNotFoundError):
+            raise ValueError(
+                f"Cannot load {path!r}: it holds an object of module {e.name!r}, which cannot be imported here ({e}). "
+                "Install or import that module first, or replace the object with custom_objects (e.g. "
+                "custom_objects={'policy_kwargs': {...}})."
+            ) from e
         raise ValueError(
             f"Cannot load {path!r}: it is corrupt or not a Stable-Baselines3 save file ({type(e).__name__}: {e}). "
             "Re-save the model, or load the right file."
@@ -79,7 +86,7 @@ def check_save_file(
             "truncated) or not a Stable-Baselines3 save file. Re-save the model, or load the right file."
         )
     saved_by = data.get("_algorithm_name")
-    if saved_by != algorithm:
+    if saved_by not in {c.__name__ for c in algorithm.__mro__}:
         origin = (
             f"by sb3-es {saved_by}"
             if saved_by
@@ -94,5 +101,13 @@ def check_save_file(
                 f" To use its weights anyway, pass them as a dict: "
                 f"model.{method}({{'policy': {saved_by}.load(path).policy.state_dict()}})."
             )
-        raise ValueError(f"Cannot load {path!r} with {algorithm}.{method}(): it was saved {origin}.{hint}")
+        raise ValueError(f"Cannot load {path!r} with {algorithm.__name__}.{method}(): it was saved {origin}.{hint}")
     return data, params
+
+
+def algorithm_name(cls: type) -> str:
+    """
+    :param cls: An sb3-es algorithm class, or a user's subclass of one.
+    :return: The name of its sb3-es algorithm, which its saves record (so that the algorithm loads them too).
+    """
+    return next(c.__name__ for c in cls.__mro__ if c.__module__.startswith("sb3_es."))
