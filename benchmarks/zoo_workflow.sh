@@ -62,7 +62,7 @@ step "pip install ${WHEEL##*/}[zoo] into $VENV"
 # the installed package, not the source tree, must be the one imported
 mkdir -p "$WORK/run"
 cd "$WORK/run"
-SITE="$("$PY" -c 'import sb3_es, os; print(os.path.dirname(sb3_es.__file__))')"
+SITE="$("$PY" -c 'import sb3_es, os; print(os.path.dirname(os.path.realpath(sb3_es.__file__)))')"
 case "$SITE" in "$ROOT"*) fail "sb3_es imported from the source tree: $SITE" ;; esac
 echo "sb3_es from $SITE"
 KEYS="$("$PY" -c 'from sb3_es.zoo import ALGOS; print(*ALGOS)')"

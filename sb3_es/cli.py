@@ -35,7 +35,7 @@ FORMER_FLAGS: dict[str, str] = {
     "--log-dir": "-f FOLDER (models and logs) and -tb FOLDER (TensorBoard)",
     "--n-envs": "-params n_envs:N",
     "--subproc": "--vec-env subproc",
-    "--policy": "-params policy:NAME",
+    "--policy": "-params policy:\"'NAME'\" (rl-zoo evaluates each value: a name is quoted twice)",
 }
 
 

@@ -64,6 +64,7 @@ def test_commands_forward_to_the_zoo(
         (["--log-dir", "runs"], "--log-dir -> -f FOLDER"),
         (["--hyperparams", '{"n_episodes": 4}'], "-params key:value"),
         (["--n-envs", "4", "--subproc"], "--n-envs -> -params n_envs:N; --subproc -> --vec-env subproc"),
+        (["--policy", "LinearPolicy"], "--policy -> -params policy:\"'NAME'\""),
     ],
 )
 def test_former_train_flags_say_what_to_use(args: list[str], hint: str) -> None:
@@ -92,3 +93,17 @@ def test_abbreviated_and_attached_options_are_read_as_rl_zoo_reads_them() -> Non
     assert prepare_args("enjoy", ["--algo", "ars_es", "--env", "CartPole-v1", "-f/tmp/logs"])[-1] == "-f/tmp/logs"
     with pytest.raises(UsageError, match="--algo ars is sb3-contrib's ARS"):
         prepare_args("train", ["--alg", "ars", "--env", "CartPole-v1"])
+    # rl-zoo's single-dash long options are abbreviated too: the user's file is kept
+    assert prepare_args("train", ["--algo", "ars_es", "--env", "Pendulum-v1", "-con", "mine.yml"])[-2:] == [
+        "-con",
+        "mine.yml",
+    ]
+
+
+def test_trial_id_0_is_refused_and_a_trial_id_is_said(capsys: pytest.CaptureFixture[str]) -> None:
+    from sb3_es.zoo.commands import prepare_args
+
+    with pytest.raises(UsageError, match="--trial-id 0: rl-zoo reads a trial id of 0 as no trial"):
+        prepare_args("train", ["--algo", "openes", "--env", "CartPole-v1", "--trial-id", "0"])
+    prepare_args("train", ["--algo", "openes", "--env", "CartPole-v1", "--trial-id=3"])
+    assert "the values of trial 3 of the study replace the file's" in capsys.readouterr().out

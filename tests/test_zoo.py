@@ -570,6 +570,34 @@ def test_optimize_two_trials(key: str, tmp_path: Path) -> None:
     assert f"params_{sampled[key]}" in lines[0]
 
 
+@pytest.mark.parametrize(
+    "algo, env_id", [(algo, env_id) for algo in KEYS for env_id in QUICK_ENVS if env_id in shipped_envs(algo)]
+)
+def test_every_entry_builds_with_the_samplers_extreme_values(algo: str, env_id: str, tmp_path: Path) -> None:
+    """A sampled value with an entry's other settings is a model the trial trains (rl-zoo's objective builds it
+    outside its error handling, so one refused combination ends the whole search)."""
+    zoo_manager = manager(algo, env_id, tmp_path, optimize_hyperparameters=True)
+    assert zoo_manager.setup_experiment() is None
+    probe = optuna.create_study().ask()
+    SAMPLERS[algo](probe, zoo_manager.n_actions, zoo_manager.n_envs, {})
+    for end in ("low", "high"):
+        fixed = {
+            name: distribution.choices[0 if end == "low" else -1]
+            if isinstance(distribution, optuna.distributions.CategoricalDistribution)
+            else getattr(distribution, end)
+            for name, distribution in probe.distributions.items()
+        }
+        kwargs = {
+            **zoo_manager._hyperparams,
+            **SAMPLERS[algo](optuna.trial.FixedTrial(fixed), zoo_manager.n_actions, 1, {}),
+        }
+        env = zoo_manager.create_envs(zoo_manager.n_envs, no_log=True)
+        try:
+            ALGOS[algo](env=env, seed=None, verbose=0, **kwargs)
+        finally:
+            env.close()
+
+
 def test_pruning_on_evaluations(tmp_path: Path) -> None:
     zoo_manager = manager("openes", "CartPole-v1", tmp_path, n_timesteps=4000, optimize_hyperparameters=True)
     zoo_manager.n_evaluations = 4

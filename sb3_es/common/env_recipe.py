@@ -92,7 +92,8 @@ def env_recipe(env: VecEnv, evaluator: str) -> tuple[functools.partial[gym.Env],
     if isinstance(env, VecEnvWrapper):
         raise ValueError(
             f"evaluator={evaluator!r}: the env is wrapped in {type(env).__name__}, which the workers cannot apply "
-            f"to their own envs: remove the VecEnv wrapper (the policies normalize observations themselves), or {fix}."
+            f"to their own envs: remove the VecEnv wrapper (the policies normalize observations themselves; with "
+            f"rl-zoo, remove normalize and frame_stack from the entry or pass -params normalize:False), or {fix}."
         )
     if spec is None:
         raise ValueError(f"evaluator={evaluator!r}: the env was not built by gym.make (it has no spec): {fix}.")

@@ -91,10 +91,15 @@ def _has_option(args: Sequence[str], short: str, long: str) -> bool:
 
 
 def _spells(flag: str, names: Sequence[str]) -> bool:
-    """:return: Whether ``flag`` is one of ``names``, or an abbreviation of a long one as argparse reads it."""
-    return flag in names or (
-        flag.startswith("--") and len(flag) > 3 and any(n.startswith("--") and n.startswith(flag) for n in names)
-    )
+    """
+    :return: Whether ``flag`` is one of ``names``, or an abbreviation of one as argparse reads it: ``--con`` of
+        ``--conf-file``, and ``-con`` of rl-zoo's single-dash long options such as ``-conf``.
+    """
+    if flag in names:
+        return True
+    if flag.startswith("--"):
+        return len(flag) > 3 and any(n.startswith("--") and n.startswith(flag) for n in names)
+    return flag.startswith("-") and len(flag) > 2 and any(len(n) > 2 and n.startswith(flag) for n in names)
 
 
 def _hyperparam_overrides(args: Sequence[str]) -> dict[str, str]:
@@ -158,10 +163,19 @@ def prepare_args(command: str, args: Sequence[str]) -> list[str]:
     if not is_sb3_es_algo(algo):
         return args
     if command == "train":
+        trial_id = _option_value(args, ("--trial-id",), "")
+        if trial_id.strip() in ("0", "-0"):
+            raise UsageError(
+                "--trial-id 0: rl-zoo reads a trial id of 0 as no trial and would train with the file's values. Pass "
+                "trial 0's values with -params key:value instead (they are in the study, or in the report_*.csv "
+                "that -optimize wrote)."
+            )
         if not _has_option(args, "-conf", "--conf-file"):
             args += ["--conf-file", str(default_conf_file(algo))]
         conf = _option_value(args, ("-conf", "--conf-file"), "")
         env_id = _option_value(args, ("--env",), "CartPole-v1")
+        if trial_id:
+            print(f"sb3-es: {algo} on {env_id}: the values of trial {trial_id} of the study replace the file's")
         if conf.endswith((".yml", ".yaml")) and Path(conf).is_file():
             key, entry = config_entry(conf, env_id)
             overrides = _hyperparam_overrides(args)

@@ -48,14 +48,35 @@ def convert_population_params(sampled: dict[str, Any]) -> dict[str, Any]:
     return params
 
 
+#: The floors of OpenES's decays, as a fraction of the sampled starting values.
+OPENES_LIMIT_FRACTION = 0.1
+
+
+def convert_openes_params(sampled: dict[str, Any]) -> dict[str, Any]:
+    """
+    Keyword arguments from the values stored for an OpenES trial: those of :func:`convert_population_params`, and
+    ``sigma_limit`` and ``learning_rate_limit`` a tenth of the sampled ``sigma`` and ``learning_rate``, so that an
+    entry's ``sigma_decay`` or ``learning_rate_decay`` applies whatever value is sampled (OpenES refuses a decay
+    that starts at or below its floor).
+
+    :param sampled: The trial's values.
+    :return: Keyword arguments for :class:`~sb3_es.OpenES`.
+    """
+    params = convert_population_params(sampled)
+    for name in ("sigma", "learning_rate"):
+        if name in params:
+            params[f"{name}_limit"] = OPENES_LIMIT_FRACTION * params[name]
+    return params
+
+
 def sample_openes_params(trial: optuna.Trial, n_actions: int, n_envs: int, additional_args: dict) -> dict[str, Any]:
     """
     :data:`Sampler` of OpenES: noise ``sigma``, optimizer ``learning_rate`` and ``population_size`` (see
-    :func:`suggest_population_size_pow`).
+    :func:`suggest_population_size_pow`); the decays' floors follow them (:func:`convert_openes_params`).
 
     :return: Keyword arguments for :class:`~sb3_es.OpenES`.
     """
-    return convert_population_params(
+    return convert_openes_params(
         {
             "sigma": trial.suggest_float("sigma", 0.005, 0.5, log=True),
             "learning_rate": trial.suggest_float("learning_rate", 1e-3, 0.1, log=True),
@@ -163,7 +184,7 @@ SAMPLERS: dict[str, Sampler] = {
 #: Converters by rl-zoo key, from a trial's stored values to keyword arguments.
 CONVERTERS: dict[str, Callable[[dict[str, Any]], dict[str, Any]]] = {
     "ars_es": convert_ars_params,
-    "openes": convert_population_params,
+    "openes": convert_openes_params,
     "cmaes": convert_population_params,
     "pgpe": convert_population_params,
     "simple_es": convert_simple_es_params,
