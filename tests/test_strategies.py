@@ -165,6 +165,40 @@ def test_clipup_rejects_bad_settings(kwargs: dict, match: str) -> None:
         ClipUp([theta], **kwargs)
 
 
+@pytest.mark.parametrize(
+    ("name", "kwargs", "match"),
+    [
+        ("pgpe", dict(stdev_learning_rate=np.inf), r"stdev_learning_rate=inf: it must be a finite number"),
+        ("cmaes", dict(diagonal="auto"), r"diagonal='auto': it must be True or False"),
+    ],
+)
+def test_strategy_settings_errors_name_the_setting(name: str, kwargs: dict, match: str) -> None:
+    with pytest.raises((ValueError, TypeError), match=match):
+        STRATEGIES[name](np.zeros(3), **kwargs)
+
+
+def test_errors_of_settings_given_positionally_say_what_is_wrong() -> None:
+    with pytest.raises(
+        ValueError, match=r"center_learning_rate=-1.0: it must be a positive number"
+    ):  # not learning_rate
+        PGPEStrategy(np.zeros(3), 6, stdev_init=0.1, center_learning_rate=-1.0)
+    with pytest.raises(ValueError, match=r"n_top='2': it must be a whole number"):  # not "between 1 and n_delta"
+        ARSStrategy(np.zeros(3), 4, "2", delta_std=0.1, learning_rate=0.05)  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match=r"size=1.9: the noise table needs a whole, positive number"):
+        SharedNoiseTable(1.9)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("name", ["ars", "openes"])
+def test_a_learning_rate_scheduled_down_to_0_passes_the_settings_check(name: str) -> None:
+    """A learning-rate schedule may end at 0 (written into the strategy); load() checks the settings again."""
+    strategy = STRATEGIES[name](np.zeros(3))
+    strategy.learning_rate = 0.0  # type: ignore[attr-defined]
+    strategy.check_settings()
+    strategy.learning_rate = -0.1  # type: ignore[attr-defined]
+    with pytest.raises(ValueError, match="learning_rate=-0.1"):
+        strategy.check_settings()
+
+
 def test_make_optimizer_names() -> None:
     theta = th.nn.Parameter(th.zeros(2, dtype=th.float64))
     assert isinstance(make_optimizer("adam", [theta], 0.1), th.optim.Adam)

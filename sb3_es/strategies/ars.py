@@ -2,11 +2,16 @@
 
 from __future__ import annotations
 
-import numbers
-
 import numpy as np
 
-from sb3_es.strategies.base import Population, Strategy, check_count, check_positive_number, mirrored_groups
+from sb3_es.strategies.base import (
+    Population,
+    Strategy,
+    check_count,
+    check_non_negative,
+    check_positive_number,
+    mirrored_groups,
+)
 from sb3_es.strategies.noise import NoiseTablePopulation, SharedNoiseTable
 
 
@@ -52,11 +57,11 @@ class ARSStrategy(Strategy):
 
     def check_settings(self) -> None:
         self.n_delta = check_count("n_delta", self.n_delta)
-        if not (isinstance(self.n_top, numbers.Real) and 1 <= self.n_top <= self.n_delta):
-            raise ValueError(f"n_top={self.n_top!r} must be between 1 and n_delta={self.n_delta}.")
         self.n_top = check_count("n_top", self.n_top)
-        for name, value in (("delta_std", self.delta_std), ("learning_rate", self.learning_rate)):
-            check_positive_number(name, value)
+        if not 1 <= self.n_top <= self.n_delta:
+            raise ValueError(f"n_top={self.n_top!r} must be between 1 and n_delta={self.n_delta}.")
+        check_positive_number("delta_std", self.delta_std)
+        check_non_negative("learning_rate", self.learning_rate)  # a learning-rate schedule may end at 0
 
     @property
     def population_size(self) -> int:

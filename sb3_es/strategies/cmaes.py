@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
-from sb3_es.strategies.base import Strategy, check_count, check_positive_number
+from sb3_es.strategies.base import Strategy, check_count, check_flag, check_positive_number
 
 if TYPE_CHECKING:
     import cma
@@ -65,7 +65,7 @@ def check_full_covariance_memory(num_params: int) -> None:
             f"Full-covariance CMA-ES on {num_params} parameters needs about {needed / 2**30:,.1f} GiB "
             f"({FULL_COVARIANCE_MATRICES} matrices of {num_params} x {num_params} float64), more than this machine's "
             f"{memory / 2**30:,.1f} GiB. Use diagonal=True (separable CMA-ES, memory linear in the number of "
-            "parameters) or diagonal='auto', or a smaller policy."
+            "parameters), or a smaller policy."
         )
 
 
@@ -108,7 +108,7 @@ class CMAESStrategy(Strategy):
         if restarts not in (None, "ipop", "bipop"):
             raise ValueError(f"restarts={restarts!r}: choose None, 'ipop' or 'bipop'.")
         self.sigma0 = float(sigma)
-        self.diagonal = diagonal
+        self.diagonal = check_flag("diagonal", diagonal)  # the CMAES algorithm resolves its "auto"
         self.restarts = restarts
         self.max_restarts = max_restarts
         self.check_settings()

@@ -27,8 +27,8 @@ class SharedNoiseTable:
     """
 
     def __init__(self, size: int = 2**25, seed: int = 0) -> None:
-        if int(size) <= 0:
-            raise ValueError(f"size={size}: the noise table needs a positive size.")
+        if not (float(size).is_integer() and size >= 1):
+            raise ValueError(f"size={size!r}: the noise table needs a whole, positive number of values.")
         self.size = int(size)
         self.seed = int(seed)
         self.noise = np.random.default_rng(self.seed).standard_normal(self.size, dtype=np.float32)

@@ -107,8 +107,8 @@ class OpenESStrategy(GradientStrategy):
             raise ValueError(
                 f"population_size={population_size}: it must be at least 2, and even with antithetic sampling."
             )
-        for name, value in (("sigma", self.sigma), ("learning_rate", self.learning_rate)):
-            check_positive_number(name, value)
+        check_positive_number("sigma", self.sigma)
+        check_non_negative("learning_rate", self.learning_rate)  # a learning-rate schedule may end at 0
         for name, value in (
             ("weight_decay", self.weight_decay),
             ("sigma_limit", self.sigma_limit),

@@ -6,7 +6,7 @@ from typing import Any
 
 import numpy as np
 
-from sb3_es.strategies.base import check_count, check_number, check_positive_number, mirrored_groups
+from sb3_es.strategies.base import check_count, check_non_negative, check_number, check_positive_number, mirrored_groups
 from sb3_es.strategies.fitness import FitnessShaping, shape_fitness
 from sb3_es.strategies.optimizers import GradientStrategy, OptimizerName
 
@@ -61,6 +61,7 @@ class PGPEStrategy(GradientStrategy):
         fitness_shaping: FitnessShaping = "centered_rank",
         seed: int | np.random.SeedSequence | None = None,
     ) -> None:
+        check_positive_number("center_learning_rate", center_learning_rate)  # named as here, before the base checks
         super().__init__(center, center_learning_rate, optimizer, momentum, betas, max_speed, seed)
         self.population_size = population_size
         check_positive_number("stdev_init", stdev_init)
@@ -78,9 +79,7 @@ class PGPEStrategy(GradientStrategy):
         population_size = self.population_size = check_count("population_size", self.population_size, 2)
         if population_size % 2:
             raise ValueError(f"population_size={population_size}: it must be even (symmetric pairs) and at least 2.")
-        self.stdev_learning_rate = check_number("stdev_learning_rate", self.stdev_learning_rate)
-        if not self.stdev_learning_rate >= 0:
-            raise ValueError(f"stdev_learning_rate={self.stdev_learning_rate}: it must be >= 0 (0 keeps stdev fixed).")
+        self.stdev_learning_rate = check_non_negative("stdev_learning_rate", self.stdev_learning_rate)  # 0: fixed
         self.stdev_max_change = check_number("stdev_max_change", self.stdev_max_change)
         if not 0 < self.stdev_max_change < 1:
             raise ValueError(
