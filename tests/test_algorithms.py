@@ -150,16 +150,18 @@ def test_callback_stop_in_first_generation_keeps_initial_parameters(algo: Algo) 
     assert_identical(policy_state(model), initial)
 
 
-@pytest.mark.parametrize("algo", POPULATION_ALGORITHMS)
-def test_callback_stop_on_last_step_of_a_generation_keeps_it(algo: Algo) -> None:
+@pytest.mark.parametrize("algo", ALGORITHMS)
+def test_callback_stop_on_last_step_of_a_generation_discards_it(algo: Algo) -> None:
+    """As PPO discards a rollout whose last step's callback returned False: the model is the one judged."""
     model = pendulum_model(algo)
     recorder = GenerationRecorder(stop_at=2 * GENERATION)
     model.learn(100_000, callback=recorder)
     assert model.num_timesteps == 2 * GENERATION
-    assert_updates(algo, model, 2)  # the generation completed on that step: its update is applied
-    assert len(recorder.rollout_starts) == 2
-    assert not np.array_equal(policy_vector(model), recorder.params_at_start[1])
-    np.testing.assert_array_equal(policy_vector(model), model.strategy.center.astype(np.float32))
+    assert_updates(algo, model, 1)  # the second generation completed on that step, and is not applied
+    assert len(recorder.rollout_starts) == 2 and recorder.rollout_ends == 1
+    assert_identical(policy_state(model), recorder.state_at_start[1])
+    if algo.population:
+        np.testing.assert_array_equal(model.strategy.center.astype(np.float32), recorder.params_at_start[1])
 
 
 class RolloutEndView(BaseCallback):

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import pytest
 from gymnasium import spaces
@@ -77,6 +79,7 @@ POPULATION_CASES = {
     "mlp_no_squash_clip": (MlpPolicy, ACT_BOX, dict(net_arch=[7], squash_output=False)),
     "linear_clip": (LinearPolicy, ACT_BOX, dict()),
     "linear_bias_clip": (LinearPolicy, ACT_BOX, dict(with_bias=True)),
+    "mlp_softmax": (MlpPolicy, ACT_BOX, dict(net_arch=[8], activation_fn=nn.Softmax)),
     "mlp_discrete": (MlpPolicy, ACT_DISCRETE, dict(net_arch=[6, 6])),
     "linear_discrete": (LinearPolicy, ACT_DISCRETE, dict()),
 }
@@ -113,9 +116,13 @@ def test_population_actions_match_predict(case: str, with_obs_stats: bool) -> No
         assert np.unique(actions[:, 0]).size > 2  # not all saturated
 
 
-def test_population_actions_row_independent() -> None:
-    """Changing one row's parameters must not change any other row's action."""
-    policy = MlpPolicy(OBS_BOX, ACT_BOX, net_arch=[8], layer_norm=True)
+@pytest.mark.parametrize(
+    "kwargs", [dict(layer_norm=True), dict(activation_fn=nn.Softmax)], ids=["layer_norm", "softmax"]
+)
+def test_population_actions_row_independent(kwargs: dict) -> None:
+    """Changing one row's parameters must not change any other row's action (an activation that is not element-wise
+    acts within a row, as in the torch policy)."""
+    policy = MlpPolicy(OBS_BOX, ACT_BOX, net_arch=[8], **kwargs)
     params = random_params(policy, 4)
     obs = policy.flatten_obs(random_obs(OBS_BOX, 4))
     before = policy.population_actions(np.asarray(params, dtype=np.float32), obs)
@@ -312,6 +319,12 @@ def test_linear_policy_rejects_net_arch() -> None:
         LinearPolicy(OBS_BOX, ACT_BOX, net_arch=[16])
     # An empty net_arch is a linear policy and is accepted.
     assert LinearPolicy(OBS_BOX, ACT_BOX, net_arch=[]).num_params == 3 * 2
+
+
+@pytest.mark.parametrize("activation_fn", ["tanh", nn.Tanh()])
+def test_activation_fn_must_be_a_module_class(activation_fn: Any) -> None:
+    with pytest.raises(TypeError, match=r"activation_fn=.*: pass the class of a torch activation module, e.g\."):
+        MlpPolicy(OBS_BOX, ACT_BOX, activation_fn=activation_fn)
 
 
 def test_mlp_rejects_non_positive_layer_sizes() -> None:

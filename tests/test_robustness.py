@@ -134,11 +134,18 @@ def test_the_time_limit_of_subprocess_envs_is_found_under_rl_zoo() -> None:
 @pytest.mark.timeout(60)
 @pytest.mark.parametrize("algo", ALGORITHMS)
 def test_vec_env_wrapper_without_time_limit_is_a_clear_error(algo: Algo) -> None:
-    """A single slot cannot be reset through VecNormalize: an error says to add a TimeLimit (instead of a hang)."""
-    model = make_model(algo, VecNormalize(make_vec_env(NeverEndingEnv, n_envs=2)), max_episode_steps=20)
-    with pytest.raises(RuntimeError, match="max_episode_steps=20") as info:
+    """A single slot cannot be reset through VecNormalize: an error says to give the envs a time limit (instead of a
+    hang), at construction for a max_episode_steps below the env's own limit, else once an episode reaches the cap."""
+    fix = r"through VecNormalize .*make_vec_env\(env_id, env_kwargs=dict\(max_episode_steps=20\)\)"
+    with pytest.raises(ValueError, match=fix):
+        make_model(algo, VecNormalize(make_vec_env(NeverEndingEnv, n_envs=2)), max_episode_steps=20)
+    with pytest.raises(ValueError, match=fix):
+        make_model(algo, VecNormalize(make_vec_env("Pendulum-v1", n_envs=2)), max_episode_steps=20)
+    make_model(algo, VecNormalize(make_vec_env("Pendulum-v1", n_envs=2)), max_episode_steps=200)  # the env's own
+    model = make_model(algo, VecNormalize(make_vec_env(NeverEndingEnv, n_envs=2)))  # the default cap: 1000
+    with pytest.warns(UserWarning, match="no time limit"), pytest.raises(RuntimeError, match="1000") as info:
         model.learn(100)
-    assert "TimeLimit" in str(info.value) and "VecNormalize" in str(info.value)
+    assert "env_kwargs=dict(max_episode_steps=1000)" in str(info.value) and "VecNormalize" in str(info.value)
 
 
 # ---------------------------------------------------------------------------- observation statistics
@@ -307,7 +314,8 @@ def test_learn_stops_after_the_generation_in_flight(algo: Algo, capsys: pytest.C
     if not algo.population:
         assert "an update collects 2 episodes of at most 1000 steps" in out
     else:
-        assert "a generation evaluates 4 candidates x 1 episode(s) = 4 episodes, at most 4000 env steps" in out
+        assert "= 4 episodes, at most 4000 env steps of candidates" in out
+        assert "those steps count in num_timesteps too" in out
     # Every generation but the last started below the budget; the last one crossed it; none started after.
     assert len(log.starts) >= 3 and all(start < 150 for start in log.starts)
     assert log.ends[-2][0] < 150 <= log.ends[-1][0] == model.num_timesteps

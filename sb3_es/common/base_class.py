@@ -23,6 +23,7 @@ from stable_baselines3.common.vec_env import VecEnv
 
 from sb3_es.common.checks import check_policy_kwargs, check_positive, check_seed
 from sb3_es.common.save_util import algorithm_name, check_save_file
+from sb3_es.evaluation.slot_reset import can_reset_slots
 from sb3_es.evaluation.time_limit import env_time_limit
 from sb3_es.strategies.base import check_count, parse_number
 
@@ -207,13 +208,19 @@ class ESBaseAlgorithm(BaseAlgorithm):
             return None
         env = env if env is not None else self.env
         limit = env_time_limit(env) if env is not None else None
-        if limit is None:
-            return None
-        if self.max_episode_steps is not None and self.max_episode_steps > limit:
+        cap = self.max_episode_steps
+        if limit is not None and cap is not None and cap > limit:
             raise ValueError(
-                f"max_episode_steps={self.max_episode_steps} is above the env's own time limit ({limit} steps), "
+                f"max_episode_steps={cap} is above the env's own time limit ({limit} steps), "
                 f"which ends every episode first: pass at most {limit}, or give an env made with the longer "
-                f"limit (gym.make(env_id, max_episode_steps={self.max_episode_steps}))."
+                f"limit (gym.make(env_id, max_episode_steps={cap}))."
+            )
+        if env is not None and cap is not None and (limit is None or cap < limit) and not can_reset_slots(env):
+            raise ValueError(
+                f"max_episode_steps={cap} cuts episodes one env slot at a time, which cannot be done through "
+                f"{type(env).__name__} (the VecEnv wrapper would not see the reset). Give each env that time limit "
+                f"before wrapping the VecEnv (make_vec_env(env_id, env_kwargs=dict(max_episode_steps={cap}))), "
+                "and leave max_episode_steps out."
             )
         return limit
 

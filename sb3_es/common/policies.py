@@ -97,6 +97,11 @@ class FlatPolicy(BasePolicy):
         self.obs_dim = obs_dim
         self.action_dim = action_dim
         self.net_arch = [64, 64] if pi_arch is None else pi_arch
+        if not (isinstance(activation_fn, type) and issubclass(activation_fn, nn.Module)):
+            raise TypeError(
+                f"activation_fn={activation_fn!r}: pass the class of a torch activation module, e.g. "
+                "activation_fn=torch.nn.Tanh (not an instance or a name), as in SB3's policy_kwargs."
+            )
         self.activation_fn = activation_fn
         self.with_bias = with_bias
         self.layer_norm = check_flag("layer_norm", layer_norm)

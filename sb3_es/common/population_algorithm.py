@@ -281,11 +281,12 @@ class PopulationAlgorithm(StrategyAlgorithm):
             n = int(size) * self.n_eval_episodes
             episodes = (
                 f"{size} candidates x {self.n_eval_episodes} episode(s) = {n} episodes, at most "
-                f"{n * max_steps} env steps"
+                f"{n * max_steps} env steps of candidates"
             )
         return (
             f"{type(self).__name__}: a generation evaluates {episodes} (episodes last at most {max_steps} steps; "
-            f"env slots left idle at its end run the center policy). learn() stops at the end of the generation "
+            f"env slots left idle at its end run the center policy, and those steps count in num_timesteps too). "
+            f"learn() stops at the end of the generation "
             f"during which num_timesteps reaches {total_timesteps}, so it can overshoot by up to one generation."
         )
 
@@ -335,9 +336,10 @@ class PopulationAlgorithm(StrategyAlgorithm):
             max_episode_steps=self.episode_step_limit(),
             reset_seeds=reset_seeds,
         )
-        if result.stopped or calls.dropped:  # as SB3's collect_rollouts: no on_rollout_end for a rollout cut short
+        # As SB3's collect_rollouts: a stop on any step, the generation's last included, discards the generation
+        # (no on_rollout_end, no update), so that the model returned is the one the callback judged.
+        if result.stopped or calls.dropped or not calls.flush() or self._stop_training:
             return False
-        calls.flush()
         self._record_episodes(result)  # before on_rollout_end, so that callbacks see this generation's episodes
         callback.on_rollout_end()
         stats = result.obs_stats

@@ -103,8 +103,12 @@ class TorchActivation:
         self.module = module
 
     def __call__(self, x: np.ndarray) -> np.ndarray:
+        # Rows of features (axis 1 here), as the torch policy gives them: an activation that is not element-wise,
+        # such as Softmax, then acts within each row, never across candidates or observations.
+        rows = np.ascontiguousarray(np.moveaxis(x, 1, -1))
         with th.no_grad():
-            return self.module(th.from_numpy(np.ascontiguousarray(x))).numpy()  # type: ignore[operator]
+            out = self.module(th.from_numpy(rows.reshape(-1, rows.shape[-1]))).numpy()  # type: ignore[operator]
+        return np.moveaxis(out.reshape(rows.shape), -1, 1)
 
 
 Layer = Linear | LayerNorm | Activation

@@ -67,8 +67,8 @@ def end_capped_episodes(
         raise RuntimeError(
             f"An episode reached max_episode_steps={max_episode_steps} steps without ending, and the env's episodes "
             f"cannot be cut one slot at a time through {type(env).__name__} (the VecEnv wrapper would not see the "
-            f"reset). Give each env that time limit before wrapping the VecEnv, e.g. make_vec_env(env_id, "
-            f"wrapper_class=gymnasium.wrappers.TimeLimit, wrapper_kwargs=dict(max_episode_steps={max_episode_steps}))."
+            f"reset). Give each env that time limit before wrapping the VecEnv, inside its Monitor, e.g. "
+            f"make_vec_env(env_id, env_kwargs=dict(max_episode_steps={max_episode_steps}))."
         )
     for slot in slots.tolist():
         infos[slot]["TimeLimit.truncated"] = True
