@@ -47,7 +47,8 @@ class CMAES(PopulationAlgorithm):
     :param diagonal: ``True`` for separable (diagonal) CMA-ES, ``False`` for full covariance, ``"auto"``
         for full covariance up to ``DIAGONAL_THRESHOLD`` parameters.
     :param restarts: ``None``, ``"ipop"`` or ``"bipop"``.
-    :param max_restarts: Maximum number of restarts (only with ``restarts``: given without, it is an error).
+    :param max_restarts: Maximum number of restarts (only with ``restarts``: a value other than the default without
+        them is an error).
     :param cma_options: Other pycma options, passed through.
 
     The other parameters are those of :class:`~sb3_es.common.population_algorithm.PopulationAlgorithm`.

@@ -1,4 +1,4 @@
-"""Population evaluation on persistent worker processes of this machine (standard library only).
+"""Population evaluation on persistent worker processes of this machine (no extra dependency).
 
 Local processes host the workers of a :class:`~sb3_es.evaluation.sharded.ShardedEvaluator`, as Ray actors do for
 :class:`~sb3_es.evaluation.ray.RayEvaluator`: each process owns a VecEnv and runs whole episodes of its share with
