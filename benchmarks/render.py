@@ -10,13 +10,15 @@ Examples::
     python benchmarks/render.py model.zip --env Hopper-v5 --out hopper.mp4 --steps 1000
     python benchmarks/render.py ppo.zip --env Pendulum-v1 --algo ppo --out pendulum.gif
 
-The algorithm comes from the save's ``_algorithm_name`` (written by sb3-es models), else ``--algo``, else a
+The algorithm is ``--algo`` if given, else the save's ``_algorithm_name`` (written by sb3-es models), else a
 guess from the save's attributes (PPO, SAC, ...). Rendering uses ``render_mode="rgb_array"``: Box2D and
 classic control through pygame with ``SDL_VIDEODRIVER=dummy``; MuJoCo and dm_control offscreen with
 ``MUJOCO_GL=egl`` (or ``osmesa``), picked from the libraries found unless ``MUJOCO_GL`` is set. ``.mp4``
 needs imageio-ffmpeg; without it a GIF is written instead. If the model was trained with rl-zoo (a
-``<env>/`` folder next to the zip with ``config.yml``/``args.yml``), its env wrappers and ``VecNormalize``
-statistics are applied as in training.
+``<env>/`` folder next to the zip with ``config.yml``/``args.yml``), its env kwargs (``--env-kwargs`` over the
+config's), wrappers, frame stacking and ``VecNormalize`` statistics are applied as in training (rl-zoo's
+``enjoy`` does the same). A video ends at the last step of its last episode (the env has reset after it). Needs
+sb3-es's ``[zoo]`` extra (rl-zoo, imageio).
 """
 
 from __future__ import annotations
@@ -61,7 +63,7 @@ import numpy as np  # noqa: E402
 import yaml  # noqa: E402
 from stable_baselines3.common.base_class import BaseAlgorithm  # noqa: E402
 from stable_baselines3.common.env_util import make_vec_env  # noqa: E402
-from stable_baselines3.common.vec_env import VecEnv, VecNormalize  # noqa: E402
+from stable_baselines3.common.vec_env import VecEnv, VecFrameStack, VecNormalize  # noqa: E402
 
 from sb3_es.common.save_util import guess_foreign_algorithm  # noqa: E402
 from sb3_es.zoo import register, register_envs, sb3_es_algos  # noqa: E402
@@ -130,24 +132,29 @@ def zoo_files(model_path: Path) -> tuple[dict[str, Any], dict[str, Any], Path | 
 
 
 def make_env(
-    env_id: str, config: dict[str, Any], vec_normalize: Path | None, model: BaseAlgorithm, seed: int
+    env_id: str,
+    config: dict[str, Any],
+    saved_args: dict[str, Any],
+    vec_normalize: Path | None,
+    model: BaseAlgorithm,
+    seed: int,
 ) -> VecEnv:
     """
     One rendering env (``rgb_array``) wrapped as in training.
 
     :param env_id: Env id.
-    :param config: rl-zoo's saved hyperparameters (may give ``env_wrapper``, ``env_kwargs``).
+    :param config: rl-zoo's saved hyperparameters (may give ``env_wrapper``, ``env_kwargs``, ``frame_stack``,
+        ``vec_env_wrapper``).
+    :param saved_args: rl-zoo's saved arguments (their ``env_kwargs``, from ``--env-kwargs``, win).
     :param vec_normalize: Saved VecNormalize statistics, or None.
     :param model: The loaded model (to flatten Dict observations when it expects a Box).
     :param seed: Env seed.
     :return: The VecEnv.
     """
-    wrapper = None
-    if config.get("env_wrapper"):
-        from rl_zoo3.utils import get_wrapper_class
+    from rl_zoo3.utils import get_wrapper_class
 
-        wrapper = get_wrapper_class(config)
-    env_kwargs = dict(config.get("env_kwargs") or {})
+    wrapper = get_wrapper_class(config) if config.get("env_wrapper") else None
+    env_kwargs = {**(config.get("env_kwargs") or {}), **(saved_args.get("env_kwargs") or {})}
     env_kwargs["render_mode"] = "rgb_array"
     probe = gym.make(env_id)
     needs_flatten = isinstance(probe.observation_space, gym.spaces.Dict) and isinstance(
@@ -157,10 +164,16 @@ def make_env(
     if wrapper is None and needs_flatten:
         wrapper = gym.wrappers.FlattenObservation
     env = make_vec_env(env_id, n_envs=1, seed=seed, env_kwargs=env_kwargs, wrapper_class=wrapper)
+    # In rl-zoo's ExperimentManager order: the VecEnv wrapper, VecNormalize, frame stacking.
+    if config.get("vec_env_wrapper"):
+        vec_env_wrapper: Any = get_wrapper_class(config, "vec_env_wrapper")  # typed by rl-zoo as an Env wrapper
+        env = vec_env_wrapper(env)
     if vec_normalize is not None:
         env = VecNormalize.load(str(vec_normalize), env)
         env.training = False
         env.norm_reward = False
+    if config.get("frame_stack"):
+        env = VecFrameStack(env, int(config["frame_stack"]))
     return env
 
 
@@ -221,7 +234,7 @@ def main(argv: list[str] | None = None) -> Path:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("model", type=Path, help="saved model (.zip)")
     parser.add_argument("--env", default=None, help="env id (default: from rl-zoo's args.yml next to the model)")
-    parser.add_argument("--algo", default=None, help="rl-zoo key (ppo, ars_es, ...), when the save does not say")
+    parser.add_argument("--algo", default=None, help="rl-zoo key (ppo, ars_es, ...); default: from the save")
     parser.add_argument("--out", type=Path, default=None, help="output .gif or .mp4 (default: <model>.gif)")
     parser.add_argument("--steps", type=int, default=500, help="env steps to record at most")
     parser.add_argument("--episodes", type=int, default=1, help="stop after this many episodes")
@@ -242,31 +255,34 @@ def main(argv: list[str] | None = None) -> Path:
         raise SystemExit("Pass --env: no rl-zoo args.yml next to the model says which env it was trained on.")
     algo_class = detect_algorithm(args.model, args.algo)
     model = algo_class.load(args.model, device="cpu")
-    env = make_env(env_id, config, vec_normalize, model, args.seed)
+    env = make_env(env_id, config, saved_args, vec_normalize, model, args.seed)
+
+    def frame() -> np.ndarray:  # a rendering failure gets the install hints; other errors are raised as they are
+        try:
+            image = env.render()
+            if image is None:
+                raise RuntimeError("render() returned no frame")
+        except Exception as e:
+            raise render_error(env_id, e) from e
+        return image
+
     frames: list[np.ndarray] = []
     returns: list[float] = []
     episode_return = 0.0
     try:
         obs = env.reset()
-        frame = env.render()
-        if frame is None:
-            raise RuntimeError("render() returned no frame")
-        frames.append(frame)
+        frames.append(frame())
         for step in range(1, args.steps + 1):
             action, _ = model.predict(obs, deterministic=not args.stochastic)  # type: ignore[arg-type]
             obs, reward, done, _ = env.step(action)
             episode_return += float(reward[0])
-            if step % args.every == 0:
-                frames.append(env.render())  # type: ignore[arg-type]
             if done[0]:
                 returns.append(episode_return)
                 episode_return = 0.0
                 if len(returns) >= args.episodes:
-                    break
-    except SystemExit:
-        raise
-    except Exception as e:
-        raise render_error(env_id, e) from e
+                    break  # the env has reset: its frame would show the next episode
+            if step % args.every == 0:
+                frames.append(frame())
     finally:
         env.close()
     out = args.out or args.model.with_suffix(".gif")

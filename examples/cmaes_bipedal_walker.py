@@ -9,10 +9,14 @@ Continue a run from a checkpoint (or from the final save) for 1M more steps::
     python examples/cmaes_bipedal_walker.py --timesteps 1000000 \\
         --resume runs/cmaes_checkpoints/cmaes_bipedal_walker_1000000_steps.zip
 
-The policy is the network of the seed document: 24 observations, two hidden layers of 40 tanh units,
+(a checkpoint's name gives the env steps at which it was saved, a multiple of ``--n-envs`` at or past each
+``--checkpoint-freq``: list the folder). The policy is the network of the estool-style sketch this project grew
+from: 24 observations, two hidden layers of 40 tanh units,
 4 tanh-squashed actions, i.e. 24*40+40 + 40*40+40 + 40*4+4 = 2,804 parameters. With ``--diagonal auto``
 (the default) a policy this size uses separable CMA-ES (diagonal covariance, ``CMAES.DIAGONAL_THRESHOLD``);
-``--diagonal false`` forces the full 2,804 x 2,804 covariance matrix (much slower per generation).
+``--diagonal false`` forces the full 2,804 x 2,804 covariance matrix (much slower per generation). What
+solves BipedalWalker-v3 here is the ``cmaes.yml`` entry instead: a linear policy with each step's reward clipped to
+[-1, 1] in the fitness (307.1 over 100 episodes, docs/benchmarks.md).
 
 Checkpoints: SB3's ``CheckpointCallback`` saves the model, with the CMA-ES state, every
 ``--checkpoint-freq`` env steps. A checkpoint usually falls inside a generation; resuming from it
@@ -94,6 +98,7 @@ def main() -> None:
     mean, std = evaluate_policy(model, eval_env, n_eval_episodes=args.eval_episodes)
     print(f"mean return over {args.eval_episodes} episodes: {mean:.1f} +/- {std:.1f}")
     env.close()
+    eval_env.close()
 
 
 if __name__ == "__main__":

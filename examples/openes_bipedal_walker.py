@@ -68,6 +68,7 @@ def main() -> None:
     mean, std = evaluate_policy(model, eval_env, n_eval_episodes=args.eval_episodes)
     print(f"best candidate (training fitness {best_fitness:.1f}): {mean:.1f} +/- {std:.1f}")
     env.close()
+    eval_env.close()
 
 
 if __name__ == "__main__":

@@ -18,7 +18,7 @@ EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 #: Per script, the arguments that make it small (its own defaults train for hours).
 SMALL_ARGUMENTS = {
     "ars_bipedal_walker.py": ["--n-envs", "2"],
-    "ars_dm_control_walker.py": ["--n-envs", "2", "--policy", "MlpPolicy", "--layer-norm"],
+    "ars_dm_control_walker.py": ["--n-envs", "2", "--policy", "MlpPolicy", "--layer-norm", "--max-episode-steps", "20"],
     "cmaes_bipedal_walker.py": ["--population-size", "4", "--eval-episodes", "1", "--checkpoint-freq", "40"],
     "openes_bipedal_walker.py": ["--population-size", "4", "--eval-episodes", "1"],
     "reinforce_bipedal.py": ["--n-envs", "2", "--n-episodes", "2"],

@@ -764,6 +764,17 @@ def test_render_gif(runs: Path, tmp_path: Path) -> None:
     import imageio.v3 as iio
 
     assert iio.imread(out).shape[0] == 9  # first frame + one per step
+    # rl-zoo's --env-kwargs (args.yml) apply as in training; the video ends at the episode's last step, not on the
+    # next episode's first frame (the env has reset after the last step)
+    folder = tmp_path / "run"
+    shutil.copytree(model.parent, folder)
+    args_file = folder / "Pendulum-v1" / "args.yml"
+    saved = yaml.load(args_file.read_text(), Loader=yaml.UnsafeLoader)
+    saved["env_kwargs"] = {"max_episode_steps": 20}
+    args_file.write_text(yaml.dump(saved))
+    render = str(ROOT / "benchmarks" / "render.py")
+    run([render, str(folder / model.name), "--out", str(out), "--steps", "50"], tmp_path)
+    assert iio.imread(out).shape[0] == 20  # first frame + steps 1 to 19
 
 
 # ----------------------------------------------------------------------------------------------- docs
