@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import os
+import time
 from pathlib import Path
 from typing import Any
 
@@ -252,24 +253,37 @@ class CrashingToyEnv(ToyEnv):
     """
     ``ToyEnv`` whose process dies (``os._exit``) at its ``crash_step``-th step if ``crash_flag`` can still be
     created (so exactly one env, in one worker, dies once), and which raises ``ValueError`` while ``error_flag``
-    exists.
+    exists. Each step takes at least ``step_seconds``. ``raise_once``: the env raises ``ValueError`` instead of dying.
     """
 
-    def __init__(self, crash_flag: str, error_flag: str, crash_step: int = 5) -> None:
+    def __init__(
+        self,
+        crash_flag: str,
+        error_flag: str,
+        crash_step: int = 5,
+        step_seconds: float = 0.0,
+        raise_once: bool = False,
+    ) -> None:
         super().__init__()
         self.crash_flag = crash_flag
         self.error_flag = error_flag
         self.crash_step = crash_step
+        self.step_seconds = step_seconds
+        self.raise_once = raise_once
         self.steps = 0
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict]:
         self.steps += 1
+        if self.step_seconds:
+            time.sleep(self.step_seconds)
         if self.steps == self.crash_step:
             try:
                 os.close(os.open(self.crash_flag, os.O_CREAT | os.O_EXCL | os.O_WRONLY))
             except FileExistsError:
                 pass
             else:
+                if self.raise_once:
+                    raise ValueError("env error raised once inside a worker")
                 os._exit(1)
         if os.path.exists(self.error_flag):
             raise ValueError("env error raised inside a worker")

@@ -22,6 +22,7 @@ import pytest
 from envs import ToyEnv
 from gymnasium.wrappers import ClipReward, TransformReward
 from sb3_contrib.common.wrappers import TimeFeatureWrapper
+from sharded_helpers import toy_policy, toy_population
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.monitor import load_results
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNormalize
@@ -254,6 +255,16 @@ def test_load_and_set_env_refuse_an_env_the_workers_cannot_rebuild(tmp_path: Pat
         model.set_env(DummyVecEnv([lambda: gym.wrappers.TimeLimit(ToyEnv(), 50)]))
 
 
+def test_load_without_env_says_how_to_give_one(tmp_path: Path) -> None:
+    ARS("LinearPolicy", "Pendulum-v1", n_delta=2).save(tmp_path / "model.zip")
+    model = ARS.load(tmp_path / "model.zip", evaluator="processes")
+    with pytest.raises(ValueError, match=r"has none .*pass env= to load\(\) .* or call model.set_env"):
+        model.learn(1)
+    model.set_env(make_vec_env("Pendulum-v1"))  # the fix it names works
+    model.learn(1)
+    assert model.num_timesteps > 0
+
+
 def test_set_env_rebuilds_the_workers_from_the_new_env(monkeypatch: pytest.MonkeyPatch) -> None:
     """After ``set_env()`` the workers run the new env (rebuilt from its specs), not the env id of the constructor."""
     monkeypatch.setattr(processes, "usable_cpus", lambda: 2)
@@ -297,6 +308,26 @@ def test_subproc_vec_env_user_is_told_the_faster_option() -> None:
         env.close()
 
 
+def test_an_interrupted_call_leaves_no_reply_for_the_next_generation(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A Ctrl-C while call_workers() waits leaves the replies unread: the next generation must not take them for its
+    shares' results."""
+    env = make_vec_env(ToyEnv, n_envs=2)
+    policy = MlpPolicy(env.observation_space, env.action_space, net_arch=[4])
+    population = np.random.default_rng(0).normal(scale=0.5, size=(4, policy.num_params))
+    with ProcessEvaluator(ToyEnv, num_workers=2, envs_per_worker=2) as evaluator:
+
+        def interrupted(*args: Any) -> Any:
+            raise KeyboardInterrupt
+
+        monkeypatch.setattr(evaluator.pool, "result", interrupted)  # the call is sent, no reply is read
+        with pytest.raises(KeyboardInterrupt):
+            evaluator.call_workers(lambda venv: venv.num_envs)
+        monkeypatch.undo()
+        result = evaluator.evaluate(policy, population, population[0], 1, seed=0)
+        local = VecEnvEvaluator(make_vec_env(ToyEnv, n_envs=4)).evaluate(policy, population, population[0], 1, seed=0)
+        np.testing.assert_array_equal(result.returns, local.returns)
+
+
 def test_bad_arguments() -> None:
     with pytest.raises(ValueError, match="env instance"):
         ProcessEvaluator(ToyEnv())  # type: ignore[arg-type]
@@ -307,6 +338,8 @@ def test_bad_arguments() -> None:
             ProcessEvaluator("Pendulum-v1", envs_per_worker=bad)  # type: ignore[arg-type]
     with pytest.raises(ValueError, match=r"max_worker_restarts=-1: it must be at least 0"):
         ProcessEvaluator("Pendulum-v1", max_worker_restarts=-1)
+    with pytest.raises(ValueError, match=r"SubprocVecEnv: worker processes are daemons .* \(num_workers=\)"):
+        ProcessEvaluator("Pendulum-v1", vec_env_cls=SubprocVecEnv)
     with pytest.raises(ValueError, match="start_method='thread'"):
         ProcessEvaluator("Pendulum-v1", start_method="thread")
     with pytest.raises(TypeError, match="env_kwarg: the env arguments of a worker are wrapper_class, env_kwargs"):
@@ -442,3 +475,76 @@ def test_a_failed_call_leaves_the_workers_usable() -> None:
         with pytest.raises(KeyError, match="only the first worker fails"):
             evaluator.call_workers(fails_in_the_first)
         assert evaluator.call_workers(lambda venv: venv.num_envs) == [1, 1]
+
+
+class InfoEnv(ToyEnv):
+    """``ToyEnv`` whose last step's info holds ``make_value()`` under ``"extra"``."""
+
+    def __init__(self, make_value: Any) -> None:
+        super().__init__()
+        self.make_value = make_value
+
+    def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict]:
+        obs, reward, terminated, truncated, info = super().step(action)
+        if terminated or truncated:
+            info["extra"] = self.make_value()
+        return obs, reward, terminated, truncated, info
+
+
+class Handle:
+    """Copied as itself (as SB3's DummyVecEnv copies infos) but not picklable, as a handle to a native resource."""
+
+    def __deepcopy__(self, memo: dict) -> Handle:
+        return self
+
+    def __reduce__(self) -> Any:
+        raise TypeError("cannot pickle 'Handle' object")
+
+
+class TwoPartError(Exception):
+    """An exception whose ``__init__`` does not take its ``args``: pickle cannot rebuild it."""
+
+    def __init__(self, what: str, why: str) -> None:
+        super().__init__(f"{what} failed: {why}")
+
+
+class FailingEnv(ToyEnv):
+    def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict]:
+        raise TwoPartError("the simulator", "a joint broke")
+
+
+def test_what_workers_send_back_crosses_or_is_named() -> None:
+    policy = toy_policy()
+    population = toy_population(policy, 4)
+    # A lambda in an info crosses, as with Ray (and locally).
+    with ProcessEvaluator(functools.partial(InfoEnv, lambda: lambda: 7), num_workers=2, envs_per_worker=1) as evaluator:
+        assert evaluator.evaluate(policy, population, population[0], 1, seed=0).returns.shape == (4, 1)
+    # A value that does not pickle is named with its info key, not left as a bare pickling error.
+    locked = ProcessEvaluator(functools.partial(InfoEnv, Handle), num_workers=2, envs_per_worker=1)
+    with locked, pytest.raises(RuntimeError, match=r"holds Handle under 'extra', which does not pickle"):
+        locked.evaluate(policy, population, population[0], 1, seed=0)
+    # An exception that pickle cannot rebuild in the driver arrives as its type and message (it was a TypeError
+    # about __init__'s arguments, without the worker's traceback).
+    with ProcessEvaluator(FailingEnv, num_workers=2, envs_per_worker=1) as evaluator:
+        with pytest.raises(RuntimeError, match=r"TwoPartError: the simulator failed: a joint broke") as info:
+            evaluator.evaluate(policy, population, population[0], 1, seed=0)
+        assert "raise TwoPartError" in str(info.value.__cause__)
+
+
+def test_worker_count_follows_the_container_cpu_quota(tmp_path: Path) -> None:
+    # docker --cpus / a Kubernetes CPU limit shows as a cgroup quota, not in the affinity mask: one worker per CPU
+    # of the quota (rounded up), not one per CPU of the host.
+    cpus = len(os.sched_getaffinity(0))
+    v2, v1 = tmp_path / "v2", tmp_path / "v1"
+    (v1 / "cpu").mkdir(parents=True)
+    v2.mkdir()
+    (v2 / "cpu.max").write_text("50000 100000\n")
+    assert processes.cgroup_cpu_quota(str(v2)) == 0.5 and usable_cpus(str(v2)) == 1
+    (v2 / "cpu.max").write_text("max 100000\n")
+    assert processes.cgroup_cpu_quota(str(v2)) is None and usable_cpus(str(v2)) == cpus
+    (v1 / "cpu" / "cpu.cfs_quota_us").write_text("150000\n")
+    (v1 / "cpu" / "cpu.cfs_period_us").write_text("100000\n")
+    assert processes.cgroup_cpu_quota(str(v1)) == 1.5 and usable_cpus(str(v1)) == min(cpus, 2)
+    (v1 / "cpu" / "cpu.cfs_quota_us").write_text("-1\n")
+    assert processes.cgroup_cpu_quota(str(v1)) is None and usable_cpus(str(v1)) == cpus
+    assert processes.cgroup_cpu_quota(str(tmp_path / "none")) is None

@@ -7,8 +7,11 @@ from __future__ import annotations
 
 import gc
 import logging
+import os
 import subprocess
 import sys
+import threading
+import time
 import zipfile
 from collections.abc import Iterator
 from pathlib import Path
@@ -23,7 +26,9 @@ from stable_baselines3.common.env_util import make_vec_env
 
 from sb3_es import ARS
 from sb3_es.evaluation.ray import RayEvaluator
-from sb3_es.evaluation.worker import DEFAULT_ENVS_PER_WORKER
+from sb3_es.evaluation.ray_actor import RayWorker
+from sb3_es.evaluation.shaping import RewardShaping
+from sb3_es.evaluation.worker import DEFAULT_ENVS_PER_WORKER, env_config
 
 pytestmark = pytest.mark.ray
 
@@ -185,3 +190,126 @@ def test_worker_count_right_after_a_start_or_a_close(toy_ray: RayEvaluator, capl
         # Nothing was stopped to make room: toy_ray kept its actors.
         assert not [r for r in caplog.records if "idle Ray actor" in r.getMessage()]
         assert len(toy_ray._actors) == 2
+
+
+_DRIVER_PID = os.getpid()
+
+
+def _shaping_only_here(fields: dict[str, Any]) -> RewardShaping:
+    if os.getpid() != _DRIVER_PID:
+        raise ImportError("No module named 'my_package' (missing where the actor runs)")
+    return RewardShaping(**fields)
+
+
+class ShapingFromMissingModule(RewardShaping):
+    """A shaping that cannot be unpickled in an actor, as if its module were missing there."""
+
+    def __reduce__(self) -> Any:
+        return _shaping_only_here, (dict(reward_clip=self.reward_clip),)
+
+
+class FakeShare:
+    """Stands for ``ShareRunner.run`` in a :class:`RayWorker`: a share of ``seconds``, then lingering (or an error)."""
+
+    def __init__(self, seconds: float = 0.0, error: bool = False) -> None:
+        self.seconds = seconds
+        self.error = error
+        self.lingered = 0
+
+    def __call__(self, payload: Any, jobs: Any, seed: int, share_done: Any, keep_lingering: Any) -> dict[str, Any]:
+        time.sleep(self.seconds)
+        if self.error:
+            raise ValueError("the env failed")
+        share_done()
+        while keep_lingering():
+            self.lingered += 1
+            time.sleep(0.001)
+        return {"lingered": self.lingered}
+
+
+def in_thread(fn: Any, *args: Any) -> tuple[threading.Thread, list[Any]]:
+    """:return: A started thread running ``fn(*args)``, and the list its return value or error goes to."""
+    out: list[Any] = []
+
+    def run() -> None:
+        try:
+            out.append(fn(*args))
+        except Exception as e:
+            out.append(e)
+
+    thread = threading.Thread(target=run, daemon=True)
+    thread.start()
+    return thread, out
+
+
+@pytest.mark.timeout(60, method="thread")
+def test_actor_signals_in_any_order(monkeypatch: pytest.MonkeyPatch) -> None:
+    # Ray does not order an actor's calls across concurrency groups: stop() and jobs_done() may run before
+    # evaluate() starts or after it returned. Neither may leave the actor lingering, nor jobs_done() waiting.
+    worker = RayWorker(env_config(ToyEnv, 1))
+    share = FakeShare()
+    monkeypatch.setattr(worker.runner, "run", share)
+    worker.stop(1)  # before the share began: no lingering
+    assert worker.evaluate({}, np.arange(2), 0, token=1) == {"lingered": 0}
+    assert worker.jobs_done(1) is False  # after the evaluation returned: at once (its result tells)
+    worker.stop(1)  # too late: ignored, and the next generation still lingers until its own stop
+    share.seconds = 0.05
+    waiting, done = in_thread(worker.jobs_done, 2)
+    evaluating, result = in_thread(worker.evaluate, {}, np.arange(2), 0, 2)
+    waiting.join(10)
+    assert done == [True]
+    time.sleep(0.05)
+    assert evaluating.is_alive()  # lingering
+    worker.stop(2)
+    evaluating.join(10)
+    assert result[0]["lingered"] > 0
+    # A failed share: the waiting jobs_done() returns False, and the error is the evaluation's result.
+    monkeypatch.setattr(worker.runner, "run", FakeShare(seconds=0.05, error=True))
+    waiting, done = in_thread(worker.jobs_done, 3)
+    with pytest.raises(ValueError, match="the env failed"):
+        worker.evaluate({}, np.arange(2), 0, token=3)
+    waiting.join(10)
+    assert done == [False]
+    assert not worker._generations  # nothing kept for generations whose evaluation returned
+
+
+@pytest.mark.timeout(300, method="thread")
+def test_generation_data_that_actors_cannot_load_is_an_error() -> None:
+    # With several actors the driver waits for each to finish its share; one whose arguments cannot be unpickled
+    # never starts it: its error is raised at once, not after generation_timeout (nor never, without one).
+    policy = toy_policy()
+    population = toy_population(policy, 4)
+    shaping = ShapingFromMissingModule(reward_clip=(-1.0, 1.0))
+    with RayEvaluator(ToyEnv, num_workers=2, num_cpus_per_worker=0.5, generation_timeout=60) as evaluator:
+        start = time.monotonic()
+        with pytest.raises(Exception, match="my_package"):
+            evaluator.evaluate(policy, population, population[0], 1, seed=0, shaping=shaping)
+        assert time.monotonic() - start < 30
+    # linger=False is accepted, as by the worker processes: no actor lingers once its share is done.
+    with RayEvaluator(ToyEnv, num_workers=2, num_cpus_per_worker=0.5, linger=False) as evaluator:
+        result = evaluator.evaluate(policy, population, population[0], 1, seed=0)
+        assert result.returns.shape == (4, 1)
+        assert evaluator.last_timings["linger_times"] == [0.0, 0.0]
+
+
+@pytest.mark.timeout(300, method="thread")
+def test_ray_restarted_by_the_user(toy_ray: RayEvaluator, caplog: pytest.LogCaptureFixture) -> None:
+    # Last in this module: it restarts Ray. An evaluator whose actors belonged to an earlier Ray session starts
+    # new ones, and closing it does not shut down the session the user started since.
+    policy = toy_policy()
+    population = toy_population(policy, 4)
+    toy_ray.close()
+    ray.shutdown()
+    init_kwargs = dict(address="local", num_cpus=2, include_dashboard=False, log_to_driver=False)
+    evaluator = RayEvaluator(ToyEnv, num_workers=1, ray_init_kwargs=init_kwargs)
+    evaluator.evaluate(policy, population, population[0], 1, seed=0)  # starts Ray
+    ray.shutdown()
+    ray.init(**init_kwargs)  # the user's own session
+    result = evaluator.evaluate(policy, population, population[0], 1, seed=0)
+    assert result.returns.shape == (4, 1)
+    evaluator.close()
+    assert ray.is_initialized()
+    # ray_init_kwargs that cannot apply, since Ray runs: said, not silently ignored.
+    with caplog.at_level(logging.WARNING), RayEvaluator(ToyEnv, num_workers=1, ray_init_kwargs=dict(num_cpus=1)):
+        pass
+    assert any("were not applied" in record.getMessage() for record in caplog.records)

@@ -250,6 +250,51 @@ def test_reset_seeds_same_episodes_as_local(host: str) -> None:
     assert not np.allclose(local.returns[:, 0], local.returns[0, 0])
 
 
+def test_no_lingering_after_a_death(host: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A worker still running its share when another dies does not linger through the replacement's start-up."""
+    crash_flag = str(tmp_path / "crashed")
+    policy = toy_policy()
+    population = toy_population(policy, 8, seed=3)
+    center = np.zeros(policy.num_params)
+    local = VecEnvEvaluator(make_vec_env(ToyEnv, n_envs=2)).evaluate(policy, population, center, 1, seed=0)
+
+    def slow_env() -> CrashingToyEnv:  # a share takes tens of ms; one worker dies at its first steps
+        return CrashingToyEnv(crash_flag, str(tmp_path / "no_error"), crash_step=2, step_seconds=0.002)
+
+    with make_evaluator(host, slow_env, num_workers=2) as evaluator:
+        evaluator.start()
+        replace = evaluator.pool.replace
+
+        def slow_replace(k: int) -> None:  # the replacement takes 1 s to start, the survivor's share much less
+            time.sleep(1.0)
+            replace(k)
+
+        monkeypatch.setattr(evaluator.pool, "replace", slow_replace)
+        result = evaluator.evaluate(policy, population, center, 1, seed=0)
+        assert evaluator.restarted_workers == 1
+        assert_same_candidates(result, local)
+        assert sum(evaluator.last_timings["linger_times"]) < 0.5, evaluator.last_timings
+
+
+def test_an_env_error_is_raised_at_once(host: str, tmp_path: Path) -> None:
+    """One worker's env raises at its first step while the other's share takes seconds: the error comes at once,
+    not once the other share is done (nor as a TimeoutError hiding it)."""
+    policy = toy_policy()
+    population = toy_population(policy, 8, seed=3)
+
+    def slow_env() -> CrashingToyEnv:
+        return CrashingToyEnv(
+            str(tmp_path / "raised"), str(tmp_path / "no_error"), crash_step=1, step_seconds=0.2, raise_once=True
+        )
+
+    with make_evaluator(host, slow_env, num_workers=2, generation_timeout=2.0) as evaluator:
+        start = time.monotonic()
+        with pytest.raises(ValueError, match="env error raised once inside a worker"):
+            evaluator.evaluate(policy, population, population[0], 1, seed=0)
+        assert time.monotonic() - start < 1.5
+        assert workers(evaluator) == []
+
+
 def test_faults(host: str, tmp_path: Path, caplog: pytest.LogCaptureFixture, monkeypatch: pytest.MonkeyPatch) -> None:
     crash_flag, error_flag = str(tmp_path / "crashed"), str(tmp_path / "error")
     policy = toy_policy()

@@ -88,8 +88,9 @@ def resolve_evaluator(
             factory, env_args = env_recipe(env, evaluator)
             return host(factory, **env_args)
         raise ValueError(
-            f"evaluator={evaluator!r} needs the env id the model was created with (it is not saved) or an env: set "
-            f"model.evaluator = {host.__name__}('EnvId') (from {host.__module__}) before learn()."
+            f"evaluator={evaluator!r} needs an env to rebuild in its workers, and this model has none (the env id "
+            "it was created with is not saved): pass env= to load() (a Gymnasium env or a VecEnv, e.g. "
+            "make_vec_env('Pendulum-v1')) or call model.set_env(...) before learn()."
         )
     check_evaluator(evaluator, env_id, env)  # a name other than "local" (a typo given to load()) is refused
     if env is None:

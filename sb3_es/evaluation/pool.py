@@ -61,9 +61,10 @@ class WorkerPool(ABC):
     @abstractmethod
     def wait_share_done(self, ks: Sequence[int], timeout: float | None) -> tuple[int, WorkerDied | None]:
         """
-        Wait until one of the lingering workers ``ks`` has finished its share (or failed), or died.
+        Wait until one of the lingering workers ``ks`` has finished its share or died.
 
         :return: The worker, and the error if it died.
+        :raises Exception: The error of a worker whose share failed (raised at once).
         """
 
     @abstractmethod

@@ -9,7 +9,6 @@ re-raised in the driver with that traceback as its cause.
 from __future__ import annotations
 
 import os
-import pickle
 import signal
 import traceback
 import weakref
@@ -46,10 +45,14 @@ def worker_main(conn: Connection, config: bytes, stop: Any, tables: list[SharedN
 
     def reply(*message: Any) -> None:
         try:
-            conn.send(message)
-        except (pickle.PicklingError, TypeError, AttributeError) as e:  # e.g. an info value that does not pickle
-            error = RuntimeError(f"The worker's {message[0]!r} reply could not be sent to the driver: {e}")
-            conn.send(("error", error, traceback.format_exc()))
+            data = cloudpickle.dumps(message)  # as Ray: lambdas and local classes (in infos, say) cross too
+        except Exception as e:  # e.g. an info value that does not pickle (a lock, an open file)
+            error = RuntimeError(
+                f"The worker's {message[0]!r} reply could not be sent to the driver{_unpicklable_part(message)}: "
+                f"{type(e).__name__}: {e}"
+            )
+            data = cloudpickle.dumps(("error", error, traceback.format_exc()))
+        conn.send_bytes(data)
 
     def serve(runner: ShareRunner, kind: str, args: Any) -> None:
         if kind == "run":
@@ -60,7 +63,7 @@ def worker_main(conn: Connection, config: bytes, stop: Any, tables: list[SharedN
                 return
 
             def share_done() -> None:
-                conn.send(("done", token))
+                reply("done", token)
 
             def keep_lingering() -> bool:  # until the driver says so, or is gone (the worker is then re-parented)
                 return stop.value != token and os.getppid() == driver
@@ -75,7 +78,7 @@ def worker_main(conn: Connection, config: bytes, stop: Any, tables: list[SharedN
         try:
             runner = ShareRunner(cloudpickle.loads(config))
         except Exception as e:  # e.g. an unknown env id
-            reply("error", e, traceback.format_exc())
+            reply("error", portable(e), traceback.format_exc())
             return
         for table in tables:
             runner.noise_tables[table.key] = table.noise
@@ -90,9 +93,36 @@ def worker_main(conn: Connection, config: bytes, stop: Any, tables: list[SharedN
             try:
                 serve(runner, kind, args)
             except Exception as e:
-                reply("error", e, traceback.format_exc())
+                reply("error", portable(e), traceback.format_exc())
     except (BrokenPipeError, ConnectionResetError):  # the driver is gone
         return
+
+
+def portable(error: Exception) -> Exception:
+    """
+    :return: ``error`` if the driver can rebuild it from its pickle, else a ``RuntimeError`` with its type and
+        message (an exception whose ``__init__`` takes other arguments than its ``args`` cannot be rebuilt).
+    """
+    try:
+        cloudpickle.loads(cloudpickle.dumps(error))
+        return error
+    except Exception:
+        return RuntimeError(f"{type(error).__module__}.{type(error).__qualname__}: {error}")
+
+
+def _unpicklable_part(message: tuple[Any, ...]) -> str:
+    """:return: Where in a reply the value that does not pickle is, as words (empty if not in an info)."""
+    output = message[1] if len(message) > 1 else None
+    for _, slot, info in output.get("done_infos", []) if isinstance(output, dict) else []:
+        for key, value in info.items():
+            try:
+                cloudpickle.dumps(value)
+            except Exception:
+                return (
+                    f" (the info of env slot {slot} holds {type(value).__name__} under {key!r}, which does not "
+                    "pickle: keep info values plain, or leave that key out)"
+                )
+    return ""
 
 
 def raise_remote(error: BaseException, tb: str) -> None:

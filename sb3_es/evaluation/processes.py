@@ -15,6 +15,7 @@ their pipe closes, and are daemons, so that none outlives the driver.
 
 from __future__ import annotations
 
+import math
 import multiprocessing as mp
 import os
 import pickle
@@ -27,7 +28,7 @@ from typing import Any
 import cloudpickle
 import gymnasium as gym
 import numpy as np
-from stable_baselines3.common.vec_env import VecEnv
+from stable_baselines3.common.vec_env import SubprocVecEnv, VecEnv
 from typing_extensions import Unpack
 
 from sb3_es.evaluation.pool import WorkerDied, WorkerPool
@@ -116,7 +117,7 @@ class ProcessPool(WorkerPool):
             raise TimeoutError(f"worker process {k} did not reply within {timeout} s")
         try:
             if conn.poll():
-                return conn.recv()
+                return tuple(cloudpickle.loads(conn.recv_bytes()))
         except (EOFError, OSError):
             pass
         process.join(1.0)
@@ -173,7 +174,9 @@ class ProcessPool(WorkerPool):
                 return k, e
             if message[0] == "done":
                 return k, None
-            self._inbox[k] = message  # its result (or error) came with no "done" (an error before the share began)
+            if message[0] == "error":  # the share failed: raised at once, not once the other shares are done
+                raise_remote(*message[1:])
+            self._inbox[k] = message  # its result came with no "done"
 
     def stop_lingering(self, k: int, token: int) -> None:
         self._stops[k].value = token
@@ -226,11 +229,33 @@ def default_start_method() -> str:
     return "fork" if sys.platform.startswith("linux") else "spawn"
 
 
-def usable_cpus() -> int:
-    """:return: The CPUs this process may run on."""
-    if hasattr(os, "sched_getaffinity"):
-        return len(os.sched_getaffinity(0))
-    return os.cpu_count() or 1
+def usable_cpus(cgroup_root: str = "/sys/fs/cgroup") -> int:
+    """
+    :param cgroup_root: Where Linux shows the control groups.
+    :return: The CPUs this process may run on, at most its container's CPU quota (``docker --cpus``, a Kubernetes
+        CPU limit), rounded up.
+    """
+    cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+    quota = cgroup_cpu_quota(cgroup_root)
+    return max(1, min(cpus, math.ceil(quota))) if quota is not None else cpus
+
+
+def cgroup_cpu_quota(root: str = "/sys/fs/cgroup") -> float | None:
+    """:return: The CPU quota of this process's control group (cgroup v2 or v1) in CPUs, or ``None`` if none."""
+    try:
+        with open(os.path.join(root, "cpu.max")) as f:  # v2: "max 100000" or "<quota> <period>"
+            quota, period = f.read().split()[:2]
+        return None if quota == "max" else int(quota) / int(period)
+    except (OSError, ValueError):
+        pass
+    try:
+        with open(os.path.join(root, "cpu", "cpu.cfs_quota_us")) as f:  # v1: -1 for none
+            quota_us = int(f.read())
+        with open(os.path.join(root, "cpu", "cpu.cfs_period_us")) as f:
+            period_us = int(f.read())
+        return quota_us / period_us if quota_us > 0 and period_us > 0 else None
+    except (OSError, ValueError):
+        return None
 
 
 class ProcessEvaluator(ShardedEvaluator):
@@ -284,6 +309,13 @@ class ProcessEvaluator(ShardedEvaluator):
         linger: bool = True,
         **env_args: Unpack[WorkerEnvArgs],
     ) -> None:
+        vec_env_cls = env_args.get("vec_env_cls")
+        if isinstance(vec_env_cls, type) and issubclass(vec_env_cls, SubprocVecEnv):
+            raise ValueError(
+                "vec_env_cls=SubprocVecEnv: worker processes are daemons and cannot start env processes of their "
+                "own. Each worker is a process already: ask for more of them (num_workers=) and leave vec_env_cls "
+                "to its default (DummyVecEnv)."
+            )
         config = env_config(env, envs_per_worker, **env_args)
         super().__init__(config, num_workers, start_timeout, max_worker_restarts, generation_timeout, linger)
         start_method = start_method or default_start_method()

@@ -67,6 +67,8 @@ class RayActorPool(WorkerPool):
         self.init_kwargs = init_kwargs
         self.start_timeout = start_timeout
         self.actors: list[Any] = []
+        #: The Ray session the actors run in (see :func:`~sb3_es.evaluation.ray_session.current_session`).
+        self._session: tuple[str, str] | None = None
         self._tables: list[set[tuple[int, int]]] = []
         self._noise_refs: dict[tuple[int, int], Any] = {}
         self._eval_refs: dict[int, Any] = {}
@@ -82,9 +84,12 @@ class RayActorPool(WorkerPool):
         return len(self.actors) * self.num_cpus_per_worker
 
     def start(self) -> None:
-        if self.actors:
+        if self.actors and self._session == ray_session.current_session():
             return
+        if self.actors:  # Ray was shut down (and maybe started again) since: those actors are gone
+            self.close()
         ray_session.ensure_started(self.init_kwargs)
+        self._session = ray_session.current_session()
         per_actor = self.num_cpus_per_worker
         if self.requested is None:  # one actor per free CPU (making room if an idle evaluator holds them all)
             free = ray_session.free_cpus()
@@ -128,7 +133,7 @@ class RayActorPool(WorkerPool):
     def close(self) -> None:
         if self.actors:
             ray = import_ray()
-            if ray.is_initialized():
+            if self._session is not None and self._session == ray_session.current_session():  # else: gone
                 free_before, held = ray_session.free_cpus(), self.cpus
                 for actor in self.actors:
                     with contextlib.suppress(Exception):  # already dead, or Ray shutting down
@@ -141,6 +146,7 @@ class RayActorPool(WorkerPool):
                     total = ray_session.total_cpus()
                     ray_session.wait_for_report(lambda free: free >= min(total, free_before + held) - 1e-6)
         self.actors = []
+        self._session = None
         self._tables = []
         self._noise_refs = {}
         self._eval_refs = {}
@@ -172,13 +178,16 @@ class RayActorPool(WorkerPool):
         from ray.exceptions import RayActorError
 
         ray = import_ray()
-        refs = {self._done_refs[k]: k for k in ks}
+        # The share's result too: an evaluation that failed before the share began (its arguments could not be
+        # unpickled in the actor) never signals the share done; its error is raised here.
+        refs = {self._done_refs[k]: k for k in ks} | {self._eval_refs[k]: k for k in ks}
         ready, _ = ray.wait(list(refs), num_returns=1, timeout=timeout)
         if not ready:
             raise TimeoutError(f"no Ray actor finished its share within {timeout} s")
         k = refs[ready[0]]
         try:
-            ray.get(ready[0])
+            if ray.get(ready[0]) is False:  # the evaluation ended without the share done: its error is raised here
+                ray.get(self._eval_refs[k])
         except RayActorError as e:
             return k, _died(e)
         return k, None
@@ -237,6 +246,9 @@ class RayEvaluator(ShardedEvaluator):
     :param start_timeout: Seconds to wait for actors to start (at the first evaluation, and for a replacement).
     :param generation_timeout: Seconds a generation may take (``None``: no limit); see
         :class:`~sb3_es.evaluation.sharded.ShardedEvaluator`.
+    :param linger: Whether finished actors run the center policy while the others finish their shares (``False``
+        makes ``num_timesteps`` reproducible, at the cost of idle actors); see
+        :class:`~sb3_es.evaluation.sharded.ShardedEvaluator`.
     :param env_args: ``make_vec_env``'s other arguments for each actor's VecEnv: ``wrapper_class``, ``env_kwargs``,
         ``wrapper_kwargs``, ``vec_env_cls`` (``DummyVecEnv`` by default), ``vec_env_kwargs``, ``monitor_kwargs``
         (see :class:`~sb3_es.evaluation.worker.WorkerEnvArgs`).
@@ -257,11 +269,12 @@ class RayEvaluator(ShardedEvaluator):
         max_actor_restarts: int = 3,
         start_timeout: float = 120.0,
         generation_timeout: float | None = None,
+        linger: bool = True,
         **env_args: Unpack[WorkerEnvArgs],
     ) -> None:
         import_ray()
         config = env_config(env, envs_per_worker, **env_args)
-        super().__init__(config, num_workers, start_timeout, max_actor_restarts, generation_timeout)
+        super().__init__(config, num_workers, start_timeout, max_actor_restarts, generation_timeout, linger)
         if not num_cpus_per_worker > 0:
             raise ValueError(f"num_cpus_per_worker={num_cpus_per_worker}: it must be positive.")
         self.num_cpus_per_worker = float(num_cpus_per_worker)

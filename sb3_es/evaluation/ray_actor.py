@@ -2,8 +2,10 @@
 
 An actor wraps a :class:`~sb3_es.evaluation.worker.ShareRunner` (a VecEnv and the local engine). Lingering uses a
 second concurrency group: while :meth:`RayWorker.evaluate` runs, the driver calls :meth:`RayWorker.jobs_done`
-(returns once the actor's share is done) and then :meth:`RayWorker.stop` (ends the lingering), both in the
-``signal`` group, so they run beside ``evaluate``.
+(returns once the actor's share is done, or once the evaluation ended without it) and :meth:`RayWorker.stop`
+(ends the lingering), both in the ``signal`` group, so they run beside ``evaluate``. Ray does not order calls of
+different groups: ``stop`` and ``jobs_done`` may run before ``evaluate`` starts or after it returned, and the
+protocol holds either way.
 """
 
 from __future__ import annotations
@@ -19,6 +21,22 @@ from sb3_es.evaluation.ray_session import import_ray
 from sb3_es.evaluation.worker import ShareRunner
 
 
+class _Generation:
+    """The signals of one generation in one actor."""
+
+    def __init__(self) -> None:
+        #: Set when the share is done, or when the evaluation ended without it (an error).
+        self.over = threading.Event()
+        #: Whether the share was done.
+        self.share_done = False
+        #: Set by the driver to end (or prevent) the lingering.
+        self.stop = threading.Event()
+
+    def done(self) -> None:
+        self.share_done = True
+        self.over.set()
+
+
 class RayWorker:
     """
     What a Ray actor runs. Turned into a Ray actor class by :func:`remote_worker_class`.
@@ -31,24 +49,41 @@ class RayWorker:
 
         th.set_num_threads(1)  # actors share the machine's cores
         self.runner = ShareRunner(config)
-        # Per generation token: set when the actor's share is done, and by the driver to end the lingering.
-        self._signals: dict[int, tuple[threading.Event, threading.Event]] = {}
-        self._signals_lock = threading.Lock()
+        self._generations: dict[int, _Generation] = {}
+        # The latest generation token whose evaluation has returned (the driver's tokens grow): signals for it or an
+        # earlier one come too late and are answered at once.
+        self._finished = 0
+        self._lock = threading.Lock()
 
-    def _signal(self, token: int) -> tuple[threading.Event, threading.Event]:
-        """:return: The ``(share done, stop lingering)`` events of generation ``token``."""
-        with self._signals_lock:
-            return self._signals.setdefault(token, (threading.Event(), threading.Event()))
+    def _generation(self, token: int) -> _Generation | None:
+        """:return: The signals of generation ``token``, or ``None`` if its evaluation has returned."""
+        with self._lock:
+            if token <= self._finished:
+                return None
+            return self._generations.setdefault(token, _Generation())
 
     def jobs_done(self, token: int) -> bool:
-        """Wait until this actor's share of generation ``token`` is done (or failed). Runs in the ``signal`` group."""
-        return self._signal(token)[0].wait()
+        """
+        Wait until this actor's share of generation ``token`` is done, or its evaluation ended. Runs in the
+        ``signal`` group.
+
+        :return: Whether the share was done (``False``: the evaluation failed, or already returned; its result
+            tells).
+        """
+        generation = self._generation(token)
+        if generation is None:
+            return False
+        generation.over.wait()
+        return generation.share_done
 
     def stop(self, token: int) -> None:
-        """End the lingering of generation ``token``: :meth:`evaluate` then returns. Runs in the ``signal`` group."""
-        self._signal(token)[1].set()
-        with self._signals_lock:
-            self._signals.pop(token, None)
+        """
+        End the lingering of generation ``token`` (prevent it, if the share is not done yet): :meth:`evaluate` then
+        returns once the share is done. Runs in the ``signal`` group.
+        """
+        generation = self._generation(token)
+        if generation is not None:
+            generation.stop.set()
 
     def ready(self) -> int:
         """:return: Number of env slots (used to wait for the actor and check it started)."""
@@ -69,8 +104,16 @@ class RayWorker:
         """
         if token is None:
             return self.runner.run(payload, jobs, seed)
-        share_done, stop = self._signal(token)
-        return self.runner.run(payload, jobs, seed, share_done.set, lambda: not stop.is_set())
+        generation = self._generation(token)
+        if generation is None:
+            raise RuntimeError(f"generation {token} was evaluated already by this actor")
+        try:
+            return self.runner.run(payload, jobs, seed, generation.done, lambda: not generation.stop.is_set())
+        finally:
+            with self._lock:
+                self._finished = max(self._finished, token)
+                for old in [t for t in self._generations if t <= self._finished]:
+                    self._generations.pop(old).over.set()  # a waiting jobs_done() returns
 
     def call(self, fn: Callable[[VecEnv], Any]) -> Any:
         """:return: ``fn(vec_env)``, run in the actor."""

@@ -46,7 +46,9 @@ REPORT_TIMEOUT = 10.0
 
 _pools: dict[bytes, SharedPool] = {}
 _users: dict[int, int] = {}  # id(pool) -> number of evaluators using it
-_started_here = False
+#: The Ray session started here (see :func:`current_session`) and its ``ray.init`` arguments; ``None`` if Ray was
+#: started by the user, or not at all.
+_started: tuple[tuple[str, str], dict[str, Any]] | None = None
 
 
 def import_ray() -> Any:
@@ -61,17 +63,37 @@ def import_ray() -> Any:
     return ray
 
 
+def current_session() -> tuple[str, str] | None:
+    """
+    :return: What identifies the running Ray session (driver node and job ids; a ``ray.shutdown()`` and
+        ``ray.init()`` give a new one), or ``None`` if Ray is not running.
+    """
+    ray = import_ray()
+    if not ray.is_initialized():
+        return None
+    context = ray.get_runtime_context()
+    return str(context.get_node_id()), str(context.get_job_id())
+
+
 def ensure_started(init_kwargs: dict[str, Any]) -> Any:
     """
-    Start Ray with ``ray.init(**init_kwargs)`` unless it is running.
+    Start Ray with ``ray.init(**init_kwargs)`` unless it is running; warn if it runs with other arguments.
 
     :return: The ``ray`` module.
     """
-    global _started_here
+    global _started
     ray = import_ray()
-    if not ray.is_initialized():
+    session = current_session()
+    if session is None:
         ray.init(**{"ignore_reinit_error": True, **init_kwargs})
-        _started_here = True
+        _started = (current_session() or ("", ""), dict(init_kwargs))
+    elif init_kwargs and (_started is None or _started[0] != session or _started[1] != init_kwargs):
+        logger.warning(
+            "Ray is already running, so ray_init_kwargs=%r were not applied: the actors run on the running Ray "
+            "instance. Call ray.shutdown() first to start Ray with them, or call ray.init(...) yourself before "
+            "creating the evaluator.",
+            init_kwargs,
+        )
     return ray
 
 
@@ -93,7 +115,7 @@ def release(key: bytes, pool: SharedPool) -> None:
     One evaluator no longer uses ``pool``: when none does, kill its actors, and shut Ray down if it was started
     here and no pool is left. Safe at interpreter exit and from a garbage-collection finalizer.
     """
-    global _started_here
+    global _started
     count = _users.get(id(pool), 0) - 1
     if count > 0:
         _users[id(pool)] = count
@@ -103,12 +125,11 @@ def release(key: bytes, pool: SharedPool) -> None:
         del _pools[key]
     with contextlib.suppress(Exception):  # Ray may be shutting down already
         pool.close()
-    if _started_here and not _pools:
-        with contextlib.suppress(Exception):
-            ray = import_ray()
-            if ray.is_initialized():
-                ray.shutdown()
-        _started_here = False
+    if _started is not None and not _pools:
+        with contextlib.suppress(Exception):  # only the session started here: not one the user started since
+            if current_session() == _started[0]:
+                import_ray().shutdown()
+        _started = None
 
 
 def total_cpus() -> float:

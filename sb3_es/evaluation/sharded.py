@@ -74,7 +74,8 @@ class ShardedEvaluator(PopulationEvaluator, ABC):
     :param start_timeout: Seconds to wait for workers to start.
     :param max_restarts: Worker replacements allowed within one generation.
     :param generation_timeout: Seconds a generation may take before the workers are stopped and ``TimeoutError``
-        is raised; ``None`` for no limit.
+        is raised; ``None`` for no limit. The start of a replacement for a dead worker is not counted (it is
+        bounded by ``start_timeout``).
     :param linger: Whether finished workers run the center policy while the others finish their shares.
     """
 
@@ -164,7 +165,11 @@ class ShardedEvaluator(PopulationEvaluator, ABC):
         :return: Its results, in worker order.
         """
         self.start()
-        return self.pool.call(fn)
+        try:
+            return self.pool.call(fn)
+        except BaseException:  # unread replies would be taken for the next generation's: start afresh
+            self.pool.close()
+            raise
 
     # ------------------------------------------------------------------ evaluation
     def _evaluate(self, generation: Generation, step_hook: StepHook | None) -> PopulationResult:
@@ -259,17 +264,24 @@ class ShardedEvaluator(PopulationEvaluator, ABC):
             for k in range(len(shares)):
                 submit(k, linger)
             pending = set(range(len(shares))) if linger else set()
+            # After a death, no worker lingers: center-policy steps, counted in num_timesteps, would fill the
+            # replacement's start-up time and its re-run of the share. Each is told so at once (a worker still running
+            # its share then stops when it is done), and again when its share is done (the replacement, and a Ray
+            # actor that got the signal before its share began).
+            a_worker_died = False
             while pending:
                 k, error = pool.wait_share_done(sorted(pending), _remaining(deadline))
                 if error is None:
                     pending.discard(k)
-                else:  # a dead worker's share is re-run by its replacement; the finished ones stop lingering,
-                    # since their center-policy steps, counted in num_timesteps, would fill its start-up time
-                    for j in range(len(shares)):
-                        if j not in pending:
-                            pool.stop_lingering(j, token)
-                    replace(k, error)
-                    submit(k, True)
+                    if a_worker_died:
+                        pool.stop_lingering(k, token)
+                    continue
+                a_worker_died = True
+                for j in range(len(shares)):
+                    if j != k:
+                        pool.stop_lingering(j, token)
+                replace(k, error)  # its share is re-run by its replacement
+                submit(k, True)
             if linger:
                 for k in range(len(shares)):
                     pool.stop_lingering(k, token)

@@ -139,8 +139,9 @@ class ShareRunner:
         :param jobs: The jobs of this share: job ``j`` is episode ``j // n_candidates`` of candidate
             ``j % n_candidates``.
         :param seed: Env seed of this share.
-        :param share_done: If given, the worker lingers: called once when the share is done (also on an error),
-            after which every slot runs the center policy while ``keep_lingering()`` returns True.
+        :param share_done: If given, the worker lingers: called once when the share is done (not on an error,
+            which the driver gets as the call's result), after which every slot runs the center policy while
+            ``keep_lingering()`` returns True.
         :param keep_lingering: See ``share_done``.
         :return: The engine's result, the dones and rewards of every vec step, the done slots' infos (without
             ``terminal_observation``) and the timings (in the engine, of which lingering).
@@ -169,24 +170,23 @@ class ShareRunner:
                 return lingering()
 
         start = time.perf_counter()
-        try:  # from here on, share_done() is called whatever happens, so that the driver's wait ends
-            network: NetworkSpec = payload["network"]
-            self._set_clock(payload["clock_start"])
-            center = payload["center"]
-            candidates = jobs % payload["n_candidates"]
-            reset_seeds = None if payload["reset_seeds"] is None else payload["reset_seeds"][jobs][:, None]
-            if payload["population"] is not None:
-                rows = payload["population"][candidates]
-            else:
-                key, offsets, scales = payload["noise"]
-                rows = noise_rows(self.noise_tables[tuple(key)], center, offsets[candidates], scales[candidates])
-            generation = Generation(
-                network, rows, center, 1, seed, payload["shaping"], payload["max_episode_steps"], reset_seeds
-            )
-            result = self.engine.run(generation, record, linger)
-        finally:
-            if share_done is not None and not linger_start:
-                share_done()  # also on an error, so that the driver's wait ends
+        # An error is not signalled as a done share: the driver, waiting for the shares, gets it at once.
+        network: NetworkSpec = payload["network"]
+        self._set_clock(payload["clock_start"])
+        center = payload["center"]
+        candidates = jobs % payload["n_candidates"]
+        reset_seeds = None if payload["reset_seeds"] is None else payload["reset_seeds"][jobs][:, None]
+        if payload["population"] is not None:
+            rows = payload["population"][candidates]
+        else:
+            key, offsets, scales = payload["noise"]
+            rows = noise_rows(self.noise_tables[tuple(key)], center, offsets[candidates], scales[candidates])
+        generation = Generation(
+            network, rows, center, 1, seed, payload["shaping"], payload["max_episode_steps"], reset_seeds
+        )
+        result = self.engine.run(generation, record, linger)
+        if share_done is not None and not linger_start:
+            share_done()
         end = time.perf_counter()
         n_envs = self.env.num_envs
         dones = np.stack(dones_log) if dones_log else np.zeros((0, n_envs), dtype=bool)
