@@ -311,9 +311,8 @@ def test_subproc_vec_env_user_is_told_the_faster_option() -> None:
 def test_an_interrupted_call_leaves_no_reply_for_the_next_generation(monkeypatch: pytest.MonkeyPatch) -> None:
     """A Ctrl-C while call_workers() waits leaves the replies unread: the next generation must not take them for its
     shares' results."""
-    env = make_vec_env(ToyEnv, n_envs=2)
-    policy = MlpPolicy(env.observation_space, env.action_space, net_arch=[4])
-    population = np.random.default_rng(0).normal(scale=0.5, size=(4, policy.num_params))
+    policy = toy_policy()
+    population = toy_population(policy, 4)
     with ProcessEvaluator(ToyEnv, num_workers=2, envs_per_worker=2) as evaluator:
 
         def interrupted(*args: Any) -> Any:
