@@ -459,6 +459,7 @@ TRAINED = sorted((Path(__file__).resolve().parents[1] / "benchmarks" / "trained"
 #: (300.5, min 297.6; 632.7, min 387.7; 709.2, min 638.7).
 TRAINED_ENVS = {
     "ars_bipedalwalker_v3.zip": ("BipedalWalker-v3", 250.0),
+    "ars_humanoid_v5.zip": ("Humanoid-v5", 5500.0),
     "pgpe_walker_walk_mlp_ln.zip": ("dm_control/walker-walk-v0", 350.0),
     "pgpe_walker_walk_mlp_ln_s1.zip": ("dm_control/walker-walk-v0", 550.0),
 }
