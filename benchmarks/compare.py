@@ -254,6 +254,15 @@ class Progress:
         else:
             print(line, flush=True)
 
+    def note(self, text: str) -> None:
+        """
+        Print a line of its own (a confirmation's result), after the progress line.
+
+        :param text: The line, printed after the run's label.
+        """
+        print(("\n" if self.tty else "") + f"{self.label}: {text}", flush=True)
+        self._last = -math.inf  # the progress line follows at once
+
     def close(self) -> None:
         """End the line on a terminal."""
         if self.tty:
@@ -389,6 +398,11 @@ class RecordingEvalCallback(EvalCallback):
                 "mean_return": mean,
                 "std_return": float(np.std(returns)),
             }
+        )
+        verdict = "confirmed" if mean >= self.stop_at else "not confirmed, training goes on"
+        self.progress.note(
+            f"{self.confirm_episodes} confirmation episodes at {self.evaluations_timesteps[-1]:,} steps: "
+            f"{mean:,.1f} +- {np.std(returns):,.1f} ({verdict}; threshold {self.stop_at:g})"
         )
         return mean >= self.stop_at
 

@@ -677,7 +677,7 @@ def test_compare_runs_sb3_contribs_ars_under_its_rl_zoo_key(tmp_path: Path, caps
     assert "n_delta" in (out / "configs" / "ars-Pendulum-v1.yml").read_text()  # rl-zoo's ars.yml entry
 
 
-def test_compare_confirms_a_threshold_before_stopping(tmp_path: Path) -> None:
+def test_compare_confirms_a_threshold_before_stopping(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     compare = load_script("compare")
     out = tmp_path / "cmp"
     # any policy scores above -2000 on Pendulum-v1: the start evaluation reaches it, 3 more episodes confirm it
@@ -694,6 +694,9 @@ def test_compare_confirms_a_threshold_before_stopping(tmp_path: Path) -> None:
     assert summary["env_steps"] < 20000 and (folder / "confirmed_model.zip").is_file()
     text = (out / "results.md").read_text()
     assert "1/1 seeds; confirmed on 3 episodes" in text
+    # the progress output says what the confirmation gave, when it happens
+    printed = capsys.readouterr().out
+    assert "3 confirmation episodes at 0 steps: " in printed and "(confirmed; threshold -2000)" in printed
     with pytest.raises(SystemExit, match="add it, with --threshold"):
         compare.main(["--algos", "ars_es", "--steps", "10", "--confirm-episodes", "3", "--out", str(out)])
     # An evaluation at which the time budget runs out is confirmed too (it used to end the run unconfirmed: a miss).
