@@ -388,23 +388,23 @@ class RecordingEvalCallback(EvalCallback):
             self.model, self.eval_env, self.confirm_episodes, deterministic=True, return_episode_rewards=True
         )
         mean = float(np.mean(returns))
-        if mean >= self.stop_at:
+        held = mean >= self.stop_at
+        if held:
             self.model.save(Path(self.best_model_save_path or ".") / "confirmed_model")
         self.eval_seconds += time.perf_counter() - start
-        self.confirmations.append(
-            {
-                "env_steps": self.evaluations_timesteps[-1],
-                "wall_s": round(self.train_seconds(), 3),
-                "mean_return": mean,
-                "std_return": float(np.std(returns)),
-            }
-        )
-        verdict = "confirmed" if mean >= self.stop_at else "not confirmed, training goes on"
+        confirmation = {
+            "env_steps": self.evaluations_timesteps[-1],
+            "wall_s": round(self.train_seconds(), 3),
+            "mean_return": mean,
+            "std_return": float(np.std(returns)),
+        }
+        self.confirmations.append(confirmation)
+        verdict = "confirmed" if held else "not confirmed, training goes on"
         self.progress.note(
-            f"{self.confirm_episodes} confirmation episodes at {self.evaluations_timesteps[-1]:,} steps: "
-            f"{mean:,.1f} +- {np.std(returns):,.1f} ({verdict}; threshold {self.stop_at:g})"
+            f"{self.confirm_episodes} confirmation episodes at {confirmation['env_steps']:,} steps: "
+            f"{mean:,.1f} +- {confirmation['std_return']:,.1f} ({verdict}; threshold {self.stop_at:g})"
         )
-        return mean >= self.stop_at
+        return held
 
     def _check_threshold(self) -> bool:
         """:return: Whether a new evaluation reached ``stop_at`` (and, with ``confirm_episodes``, was confirmed)."""
