@@ -268,7 +268,8 @@ class ProcessEvaluator(ShardedEvaluator):
     worker that dies (its share re-run), exact merge of the observation statistics. With a given seed and
     ``num_workers``, the candidates' returns and so the parameters are reproducible; ``num_timesteps`` also counts
     the center-policy steps of lingering workers, which depend on timing (``linger=False`` makes them
-    reproducible too, at the cost of idle workers at the end of each generation).
+    reproducible too, at the cost of idle workers at the end of each generation). An env that ``reset(seed=...)``
+    does not restore completely (BipedalWalker-v3 keeps its Box2D world) is reproducible only with ``linger=False``.
 
     An exception raised by the env in a worker is raised in the driver with the worker's traceback as its cause;
     an error or ``KeyboardInterrupt`` during a generation kills the workers (fresh ones start at the next

@@ -53,7 +53,8 @@ class ShardedEvaluator(PopulationEvaluator, ABC):
     policy until every share is done (the driver then tells the workers to stop); the completed episodes are
     reported as center episodes and the steps counted. So no worker idles at the end of a generation, but these
     extra steps depend on timing: with several workers, ``num_timesteps`` and the center returns are not
-    reproducible to the step (the candidates' returns, the observation statistics and so the parameters are).
+    reproducible to the step (the candidates' returns, the observation statistics and so the parameters are, for
+    envs whose episodes depend only on the reset seed; on BipedalWalker the lingering steps change later episodes).
     ``linger=False`` makes the step counts reproducible too, at the cost of idle workers. One share never lingers.
 
     Callbacks: remote steps cannot call the driver's callbacks, so when the results are back the step hook is
