@@ -24,7 +24,7 @@ from typing import Any
 
 import gymnasium as gym
 import shimmy
-from common import PAPER_THRESHOLDS, hardware, versions
+from common import PAPER_THRESHOLDS, hardware, step_count, versions
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.evaluation import evaluate_policy
 
@@ -115,9 +115,9 @@ def run(
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--env", choices=sorted(PRESETS), default="Swimmer-v5")
-    parser.add_argument("--steps", type=int, default=300_000)
+    parser.add_argument("--steps", type=step_count, default=300_000)
     parser.add_argument("--max-seconds", type=float, default=float("inf"))
-    parser.add_argument("--eval-every", type=int, default=20_000)
+    parser.add_argument("--eval-every", type=step_count, default=20_000)
     parser.add_argument("--seeds", default="237,759,959,0")
     parser.add_argument("--n-envs", type=int, default=2)
     parser.add_argument("--variants", default="V1,V2")

@@ -8,6 +8,7 @@ The scripts import it as ``from common import ...`` (Python puts a script's own 
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import multiprocessing as mp
 import os
@@ -55,6 +56,22 @@ def read_value(text: str) -> Any:
         with contextlib.suppress(ValueError):
             return float(value)
     return value
+
+
+def step_count(text: str) -> int:
+    """
+    An ``argparse`` type for env-step counts: ``2000000``, ``2_000_000`` or ``2e6``.
+
+    :param text: The value as typed.
+    :return: The count.
+    """
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a step count; give one such as 2000000 or 2e6") from None
+    if not value.is_integer() or value < 0:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole, non-negative number of steps; give e.g. 2e6")
+    return int(value)
 
 
 def selection_problems(seeds: list[int], envs: list[str], thresholds: dict[str, float]) -> list[str]:

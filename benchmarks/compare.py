@@ -72,7 +72,7 @@ import gymnasium as gym
 import numpy as np
 import torch
 import yaml
-from common import hardware, read_value, selection_problems, source_commit, versions
+from common import hardware, read_value, selection_problems, source_commit, step_count, versions
 from stable_baselines3.common.callbacks import EvalCallback
 from stable_baselines3.common.evaluation import evaluate_policy
 from stable_baselines3.common.utils import set_random_seed
@@ -936,9 +936,11 @@ def main(argv: list[str] | None = None) -> Path:
     parser.add_argument("--algos", nargs="+", default=list(DEFAULT_ALGOS), help="rl-zoo algorithm names")
     parser.add_argument("--envs", nargs="+", default=["Pendulum-v1"], help="gymnasium env ids")
     parser.add_argument("--seeds", nargs="+", type=int, default=[0])
-    parser.add_argument("--steps", type=int, default=None, help="env-step budget per run")
+    parser.add_argument("--steps", type=step_count, default=None, help="env-step budget per run")
     parser.add_argument("--seconds", type=float, default=None, help="training wall-clock budget per run")
-    parser.add_argument("--eval-freq", type=int, default=10_000, help="env steps between evaluations (0: end only)")
+    parser.add_argument(
+        "--eval-freq", type=step_count, default=10_000, help="env steps between evaluations (0: end only)"
+    )
     parser.add_argument("--eval-episodes", type=int, default=5)
     parser.add_argument("--out", default="results/compare", help="output folder")
     parser.add_argument("--band", choices=["minmax", "std"], default="minmax", help="band over seeds in the plots")

@@ -21,6 +21,7 @@ import json
 import time
 
 import numpy as np
+from common import step_count
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.evaluation import evaluate_policy
@@ -78,7 +79,7 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--n-envs", type=int, default=2)
     parser.add_argument("--seconds", type=float, default=480, help="training wall-clock budget")
-    parser.add_argument("--every", type=int, default=250_000, help="env steps between evaluations")
+    parser.add_argument("--every", type=step_count, default=250_000, help="env steps between evaluations")
     parser.add_argument("--threshold", type=float, default=300)
     parser.add_argument("--out", default="results/pilot/run", help="prefix of the saved models")
     parser.add_argument("--check", metavar="ZIP", help="only evaluate this saved model over --check-episodes")

@@ -22,6 +22,7 @@ from concurrent.futures import ProcessPoolExecutor
 from typing import Any
 
 import numpy as np
+from common import step_count
 
 
 def run_seed(config: dict[str, Any]) -> dict[str, Any]:
@@ -75,7 +76,7 @@ def run_seed(config: dict[str, Any]) -> dict[str, Any]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--env", default="LunarLanderContinuous-v3", help="Box action space env id")
-    parser.add_argument("--timesteps", type=int, default=100_000, help="env steps per seed")
+    parser.add_argument("--timesteps", type=step_count, default=100_000, help="env steps per seed")
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     parser.add_argument("--n-envs", type=int, default=8, help="env slots per seed")
     parser.add_argument("--n-episodes", type=int, default=8, help="episodes per update")

@@ -34,7 +34,7 @@ import gymnasium as gym
 import numpy as np
 import shimmy
 import yaml
-from common import PAPER_THRESHOLDS, selection_problems
+from common import PAPER_THRESHOLDS, selection_problems, step_count
 
 import sb3_es
 from sb3_es.zoo import default_conf_file, sb3_es_algos
@@ -321,7 +321,7 @@ def main(argv: list[str] | None = None) -> str:
     parser.add_argument("--algos", nargs="+", default=sorted(sb3_es_algos()), help="sb3-es algorithm keys")
     parser.add_argument("--envs", nargs="+", required=True, help="env ids (entries of the packaged YAML files)")
     parser.add_argument("--seeds", nargs="+", type=int, default=[0, 1])
-    parser.add_argument("--max-steps", type=int, default=None, help="cap on the entry's n_timesteps")
+    parser.add_argument("--max-steps", type=step_count, default=None, help="cap on the entry's n_timesteps")
     parser.add_argument("--max-seconds", type=float, default=None, help="training wall-clock cap per run")
     parser.add_argument("--eval-episodes", type=int, default=DEFAULT_EVAL_EPISODES)
     parser.add_argument("--eval-envs", type=int, default=1, help="envs the evaluation episodes run on side by side")

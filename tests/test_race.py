@@ -85,6 +85,23 @@ def test_overrides_read_yaml_values_and_exponent_numbers() -> None:
         parse_overrides(["n_timesteps=5e7"])
 
 
+@pytest.mark.parametrize("text", ["2000000", "2_000_000", "2e6", "2.0E6"])
+def test_step_counts_read_exponent_form(text: str) -> None:
+    assert load_script("compare").step_count(text) == 2_000_000
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [("1.5", "not a whole, non-negative number"), ("-5", "not a whole"), ("2M", "not a step count")],
+)
+def test_compare_refuses_step_counts_that_are_not_whole(
+    text: str, message: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    with pytest.raises(SystemExit):
+        load_script("compare").main(["--algos", "ars_es", "--envs", "CartPole-v1", "--steps", text])
+    assert f"argument --steps: '{text}' is {message}" in capsys.readouterr().err
+
+
 def test_a_run_continues_from_its_last_model(tmp_path: Any) -> None:
     main = load_script("compare").main
     common = ["--algos", "ars_es", "--envs", "CartPole-v1", "--seeds", "0", "--eval-freq", "1000"]
