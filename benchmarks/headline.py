@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 import torch
-from common import read_value, system_info
+from common import read_value, step_count, system_info
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.evaluation import evaluate_policy
 
@@ -66,7 +66,7 @@ def main() -> None:
     parser.add_argument("--algo", default="ARS")
     parser.add_argument("--policy", default="MlpPolicy")
     parser.add_argument("--env", default="BipedalWalker-v3")
-    parser.add_argument("--steps", nargs="+", type=float, default=[1e6], help="budgets at which to evaluate")
+    parser.add_argument("--steps", nargs="+", type=step_count, default=[1_000_000], help="budgets at which to evaluate")
     parser.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
     parser.add_argument("--episodes", type=int, default=10)
     parser.add_argument(
@@ -76,7 +76,7 @@ def main() -> None:
     args = parser.parse_args()
     torch.set_num_threads(1)
     kwargs = {key: read_value(value) for key, value in (item.split("=", 1) for item in args.set)}
-    budgets = sorted(int(b) for b in args.steps)
+    budgets = sorted(args.steps)
     rows = [
         row
         for seed in args.seeds
