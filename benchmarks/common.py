@@ -60,7 +60,8 @@ def read_value(text: str) -> Any:
 
 def step_count(text: str) -> int:
     """
-    An ``argparse`` type for env-step counts: ``2000000``, ``2_000_000`` or ``2e6``.
+    An ``argparse`` type for env-step counts: ``2000000``, ``2_000_000`` or ``2e6`` (the range is the script's to
+    check, with the flag's own message).
 
     :param text: The value as typed.
     :return: The count.
@@ -69,8 +70,8 @@ def step_count(text: str) -> int:
         value = float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"{text!r} is not a step count; give one such as 2000000 or 2e6") from None
-    if not value.is_integer() or value < 0:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a whole, non-negative number of steps; give e.g. 2e6")
+    if not value.is_integer():
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number of steps; give one such as 2000000 or 2e6")
     return int(value)
 
 
