@@ -349,6 +349,17 @@ def test_bad_arguments() -> None:
     assert evaluator._workers == []
 
 
+#: Opens the driver scripts below (as run): a driver dies with the test process should pytest itself be killed mid-test
+#: (Linux's ``PR_SET_PDEATHSIG``), rather than train on with ``learn(10**9)``; its workers then exit as its pipes close.
+DIE_WITH_PYTEST = """
+import ctypes
+import signal
+import sys
+
+if sys.platform == "linux":
+    ctypes.CDLL(None).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
+"""
+
 SCRIPT = """
 import signal
 import sys
@@ -369,7 +380,7 @@ print("done", flush=True)
 
 def run_script(steps: int) -> subprocess.Popen:
     return subprocess.Popen(
-        [sys.executable, "-c", SCRIPT, str(steps)],
+        [sys.executable, "-c", DIE_WITH_PYTEST + SCRIPT, str(steps)],
         cwd=REPO,
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
@@ -439,7 +450,7 @@ def test_killed_driver_leaves_no_process(tmp_path: Path) -> None:
     """A driver killed at once (SIGKILL: the OOM killer, a crashed kernel) leaves no worker running, including one
     that was lingering on the center policy."""
     script = subprocess.Popen(
-        [sys.executable, "-c", KILLED_DRIVER_SCRIPT, str(tmp_path / "slow")],
+        [sys.executable, "-c", DIE_WITH_PYTEST + KILLED_DRIVER_SCRIPT, str(tmp_path / "slow")],
         cwd=REPO,
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
