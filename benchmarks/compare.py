@@ -35,7 +35,8 @@ stopped early (it drops single-evaluation runs). A budget in steps is passed to 
 one generation (an sb3-es algorithm) or one rollout (PPO) past it; the steps taken are reported. A wall-clock
 budget stops training through a callback. With ``--stop-at-threshold --confirm-episodes 100`` an evaluation that
 reaches the threshold is confirmed on 100 more episodes (evaluation time), training stops only if they reach it
-too, and the race counts the confirmed time (the confirmed model: ``confirmed_model.zip`` in the run folder).
+too, and the race counts the confirmed time (the confirmed model: ``confirmed_model.zip`` in the run folder). A run
+that ends without a confirmed threshold has its final model confirmed too, whatever its last evaluation gave.
 Each evaluation also saves the model as ``last_model.zip``; ``--continue-from <run>/last_model.zip --out <other>``
 trains it on (one algorithm, env and seed; its step count goes on, the new run's wall-clock starts at 0).
 
@@ -291,7 +292,8 @@ class RecordingEvalCallback(EvalCallback):
         the end of training takes its place, after the last generation's update).
     :param confirm_episodes: With ``stop_at``: an evaluation reaching it is confirmed on this many more episodes
         (evaluation time, excluded from training time), and training stops only if their mean reaches it too;
-        the confirmed model is saved as ``confirmed_model.zip`` (0: the evaluation alone decides).
+        the confirmed model is saved as ``confirmed_model.zip`` (0: the evaluation alone decides). A run that ends
+        without reaching it has its final model confirmed as well.
     :param vecnormalize_path: Where rl-zoo keeps the run's ``VecNormalize`` statistics (``<run>/<env>/
         vecnormalize.pkl``, read by ``--continue-from``); None: not saved.
 
@@ -376,10 +378,11 @@ class RecordingEvalCallback(EvalCallback):
         self.next_eval = (self.num_timesteps // self.grid + 1) * self.grid if self.grid > 0 else 0
         self._evaluate()
 
-    def _confirm(self) -> bool:
+    def _confirm(self, final: bool = False) -> bool:
         """
         Evaluate the deterministic policy on ``confirm_episodes`` more episodes, as evaluation time.
 
+        :param final: Whether training has ended (the message then does not say that it goes on).
         :return: Whether their mean reaches ``stop_at``.
         """
         assert self.stop_at is not None
@@ -399,7 +402,7 @@ class RecordingEvalCallback(EvalCallback):
             "std_return": float(np.std(returns)),
         }
         self.confirmations.append(confirmation)
-        verdict = "confirmed" if held else "not confirmed, training goes on"
+        verdict = "confirmed" if held else "not confirmed" if final else "not confirmed, training goes on"
         self.progress.note(
             f"{self.confirm_episodes} confirmation episodes at {confirmation['env_steps']:,} steps: "
             f"{mean:,.1f} +- {confirmation['std_return']:,.1f} ({verdict}; threshold {self.stop_at:g})"
@@ -429,6 +432,11 @@ class RecordingEvalCallback(EvalCallback):
             self._evaluate()
         if not self.reached:
             self._check_threshold()  # the final evaluation is confirmed too, as the grid ones are
+        confirmed_here = bool(self.confirmations) and self.confirmations[-1]["env_steps"] == self.num_timesteps
+        if not self.reached and self.stop_at is not None and self.confirm_episodes and not confirmed_here:
+            # The final model is confirmed even below the threshold on its evaluation's few episodes: a policy whose
+            # episodes vary much can hold it over many (missed otherwise, as long as training went on).
+            self.reached = self._confirm(final=True)
         self.progress.update(self.num_timesteps, self.train_seconds(), self.last_mean_reward, force=True)
         super()._on_training_end()
 

@@ -710,6 +710,20 @@ def test_compare_confirms_a_threshold_before_stopping(tmp_path: Path, capsys: py
     assert (
         len(summary["confirmations"]) == 1 and "1/1 seeds; confirmed on 3 episodes" in (out / "results.md").read_text()
     )
+    # A run that ends below the threshold has its final model confirmed too (a policy whose episodes vary much can
+    # hold it over many episodes while its last evaluation, on few, fell short); Pendulum-v1 never pays above 0.
+    out = tmp_path / "cmp_final"
+    capsys.readouterr()
+    compare.main(
+        ["--algos", "ars_es", "--envs", "Pendulum-v1", "--steps", "1000", "--eval-freq", "400", "--out", str(out)]
+        + ["--eval-episodes", "2", "--threshold", "Pendulum-v1=1", "--stop-at-threshold"]
+        + ["--confirm-episodes", "3", "--eval-envs", "2"]
+    )
+    summary = json.loads((out / "logs" / "ars_es" / "Pendulum-v1_1_seed0" / "summary.json").read_text())
+    (confirmation,) = summary["confirmations"]
+    assert confirmation["env_steps"] == summary["env_steps"] >= 1000 and confirmation["mean_return"] < 0
+    assert "0/1 seeds" in (out / "results.md").read_text()
+    assert "(not confirmed; threshold 1)" in capsys.readouterr().out
 
 
 def test_compare_saves_the_vecnormalize_statistics_with_each_checkpoint(tmp_path: Path) -> None:
