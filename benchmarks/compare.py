@@ -430,13 +430,15 @@ class RecordingEvalCallback(EvalCallback):
     def _on_training_end(self) -> None:
         if not self.evaluations_timesteps or self.evaluations_timesteps[-1] != self.num_timesteps:
             self._evaluate()
-        if not self.reached:
-            self._check_threshold()  # the final evaluation is confirmed too, as the grid ones are
         confirmed_here = bool(self.confirmations) and self.confirmations[-1]["env_steps"] == self.num_timesteps
-        if not self.reached and self.stop_at is not None and self.confirm_episodes and not confirmed_here:
-            # The final model is confirmed even below the threshold on its evaluation's few episodes: a policy whose
-            # episodes vary much can hold it over many (missed otherwise, as long as training went on).
+        if self.reached or confirmed_here:  # stopped at the threshold, or this very model failed its confirmation
+            pass
+        elif self.confirm_episodes and self.stop_at is not None:
+            # The final model is confirmed whatever its evaluation gave: a policy whose episodes vary much can hold
+            # the threshold over many episodes while its evaluation, on few, fell short.
             self.reached = self._confirm(final=True)
+        else:
+            self._check_threshold()  # the final evaluation is checked too, as the grid ones are
         self.progress.update(self.num_timesteps, self.train_seconds(), self.last_mean_reward, force=True)
         super()._on_training_end()
 
