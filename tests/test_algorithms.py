@@ -34,6 +34,8 @@ from stable_baselines3.common.evaluation import evaluate_policy
 from stable_baselines3.common.monitor import load_results
 from stable_baselines3.common.vec_env import DummyVecEnv
 
+from sb3_es import CMAES
+
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 #: Pendulum-v1 episodes last exactly 200 steps: a generation of 2 candidates (episodes) on one env is 400 steps.
@@ -187,6 +189,22 @@ def test_rollout_end_sees_the_rollouts_episodes(algo: Algo) -> None:
     pendulum_model(algo).learn(3 * GENERATION, callback=view)
     assert view.buffered == [2, 4, 6]  # 2 candidate episodes (or 2 episodes per update) per generation
     assert {"env", "infos", "dones", "rewards", "new_obs", "actions"} <= view.step_locals
+
+
+@pytest.mark.parametrize("algo", ALGORITHMS)
+def test_training_goes_on_after_a_generation_cut_short(algo: Algo, tmp_path: Path) -> None:
+    """After a callback stopped learn() within a generation, learn() goes on, in memory and from a save made then (a
+    checkpoint). With a 64-unit MLP, pycma uses TPA, whose ask() uses up the mean-shift samples it injects."""
+    model = algo.make(make_vec_env("CartPole-v1", n_envs=2), 4, "MlpPolicy", policy_kwargs=dict(net_arch=[64]))
+    if algo.cls is CMAES:
+        assert model.strategy.es.mean_shift_samples
+    model.learn(100_000, callback=GenerationRecorder(stop_in_generation=3, offset=1))  # TPA is checked from there
+    assert_updates(algo, model, 2)
+    model.save(tmp_path / "cut.zip")
+    loaded = algo.cls.load(tmp_path / "cut.zip", env=make_vec_env("CartPole-v1", n_envs=2))
+    for trained in (model, loaded):
+        trained.learn(1, reset_num_timesteps=False)
+        assert_updates(algo, trained, 3)
 
 
 @pytest.mark.parametrize("algo", ALGORITHMS)

@@ -216,7 +216,7 @@ class StrategyAlgorithm(ESBaseAlgorithm):
         """
         SB3's ``save()``, with the strategy as it stands between generations (``Strategy.without_pending``): a
         save from a callback in the middle of a generation leaves out the candidates asked, which a loaded model
-        asks afresh anyway.
+        asks afresh (CMA-ES keeps them and asks them again: pycma's ``ask()`` uses up state).
         """
         strategy = self.strategy
         if strategy is not None:

@@ -88,7 +88,9 @@ class CMAESStrategy(Strategy):
     :param seed: Seed of the private random state.
     """
 
-    pending_attributes = (*Strategy.pending_attributes, "_solutions")
+    # pycma's ask() uses up state (TPA's mean-shift samples), so the candidates asked and not told are kept, in a save
+    # too, and asked again: a generation cut short (a callback, a mid-generation checkpoint) is run again as it was.
+    pending_attributes = Strategy.pending_attributes
 
     def __init__(
         self,
@@ -220,8 +222,9 @@ class CMAESStrategy(Strategy):
         if self._exhausted and self._restart_left():  # stopped with no restart left; max_restarts was raised since
             self._exhausted = False
             self._restart()
-        with self._private_random():
-            self._solutions = self.es.ask()
+        if self._solutions is None:  # else the generation asked and not told yet, asked again
+            with self._private_random():
+                self._solutions = self.es.ask()
         return np.asarray(self._solutions, dtype=np.float64)
 
     def _tell(self, fitness: np.ndarray) -> dict[str, float]:
@@ -260,14 +263,14 @@ class CMAESStrategy(Strategy):
                 popsize = max(self.min_population_size, int(base * ratio ** (self.rng.uniform() ** 2)))
                 sigma0 = self.sigma0 * 10 ** (-2 * self.rng.uniform())
         self._regime = regime
-        self.es = self._new_es(self.best_params, sigma0, popsize)
+        self.es, self._solutions = self._new_es(self.best_params, sigma0, popsize), None
         self.center = np.asarray(self.es.mean, dtype=np.float64).copy()
 
     def set_center(self, center: np.ndarray) -> None:
         """A new pycma run from ``center`` with the current step size and population size (the covariance, the
         evolution paths and the stop conditions start afresh)."""
         super().set_center(center)
-        self.es = self._new_es(self.center, self.sigma, self.population_size)
+        self.es, self._solutions = self._new_es(self.center, self.sigma, self.population_size), None
         self._exhausted = False
 
     def __setstate__(self, state: dict[str, Any]) -> None:
