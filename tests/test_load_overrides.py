@@ -99,6 +99,33 @@ def test_values_given_to_load_are_applied(cls: type[BaseAlgorithm], tmp_path: Pa
 
 
 @pytest.mark.parametrize("cls", list(CASES), ids=lambda cls: cls.__name__)
+def test_values_given_in_custom_objects_are_applied(cls: type[BaseAlgorithm], tmp_path: Path) -> None:
+    # SB3's load() rebuilds the learning-rate schedule from a replaced learning_rate: a replaced hyperparameter drives
+    # training, as one given as a keyword does, and the model does not show one value while its strategy uses another
+    case = CASES[cls]
+    model = cls.load(
+        saved(cls, tmp_path), env=make_vec_env("Pendulum-v1", n_envs=2, seed=1), custom_objects=case.applied
+    )
+    start = model.num_timesteps
+    model.learn(1, reset_num_timesteps=False)
+    assert model.num_timesteps - start == case.steps
+    check_applied(model, case.applied)
+
+
+@pytest.mark.parametrize("cls", list(CASES), ids=lambda cls: cls.__name__)
+def test_rl_zoos_enjoy_objects_are_accepted(cls: type[BaseAlgorithm], tmp_path: Path) -> None:
+    # rl-zoo's enjoy loads every model with these; a learning rate of 0 (refused by the constructors) stops the updates
+    objects = {"learning_rate": 0.0, "lr_schedule": lambda _: 0.0, "clip_range": lambda _: 0.0}
+    model = cls.load(saved(cls, tmp_path), env=make_vec_env("Pendulum-v1", n_envs=2, seed=1), custom_objects=objects)
+    assert model.learning_rate == 0.0
+    if "learning_rate" in inspect.signature(cls).parameters:
+        before = model.policy.parameters_to_vector()
+        model.learn(1, reset_num_timesteps=False)
+        check_applied(model, {"learning_rate": 0.0})
+        np.testing.assert_array_equal(model.policy.parameters_to_vector(), before)
+
+
+@pytest.mark.parametrize("cls", list(CASES), ids=lambda cls: cls.__name__)
 def test_values_that_cannot_change_are_refused(cls: type[BaseAlgorithm], tmp_path: Path) -> None:
     path = saved(cls, tmp_path)
     ((key, value),) = CASES[cls].refused.items()

@@ -314,20 +314,25 @@ class ESBaseAlgorithm(BaseAlgorithm):
         :param path: Path or file-like object of the zip archive.
         :param env: Environment to continue training on (optional for ``predict()``).
         :param device: Torch device.
-        :param custom_objects: Objects replacing saved ones, as in SB3 (to skip what cannot be deserialized; a
-            hyperparameter to change goes in ``kwargs``).
+        :param custom_objects: Objects replacing saved ones, as in SB3 (e.g. to skip what cannot be deserialized).
+            A hyperparameter there that ``load()`` can change is applied as if given in ``kwargs`` (``kwargs`` wins).
         :param print_system_info: Print the system info of the save and of this machine.
         :param force_reset: Reset the env before training.
         :param kwargs: Hyperparameters to change (constructor arguments or saved attributes); a new value is used
-            from the next update on.
+            from the next update on. ``learning_rate=0`` (no update) is accepted here, unlike in the constructor, as
+            rl-zoo's ``enjoy`` loads every model with it.
         :return: The loaded model.
         """
+        custom_objects = dict(custom_objects or {})
+        # As SB3's load() rebuilds learning_rate's schedule from a replaced learning_rate, a hyperparameter replaced
+        # here drives training: handled as a change, not left on the model beside a strategy that uses the saved one.
+        replaced = {key: custom_objects.pop(key) for key in set(custom_objects) & cls._applicable_on_load()}
         data, _ = check_save_file(path, cls, custom_objects)
         cls._check_save_data(path, data)
         signature = inspect.signature(cls.__init__).parameters
         kwargs = {
             key: _as_count(constant_value(value), getattr(signature.get(key), "annotation", None))
-            for key, value in kwargs.items()
+            for key, value in {**replaced, **kwargs}.items()
         }
         changed = cls._changed_hyperparameters(data, kwargs)
         if isinstance(device, str) and device == "auto":
@@ -398,7 +403,8 @@ class ESBaseAlgorithm(BaseAlgorithm):
                     f"Leave {key} out of load() (with rl-zoo's train -i: out of -params and the hyperparameter "
                     "file's entry), or train a new model."
                 )
-        cls._check_live_values(changed)
+        # learning_rate=0, refused by the constructors, stops the updates of a loaded model (rl-zoo's enjoy gives it).
+        cls._check_live_values({key: value for key, value in changed.items() if (key, value) != ("learning_rate", 0)})
         return changed
 
     def set_random_seed(self, seed: int | None = None) -> None:

@@ -172,7 +172,8 @@ class StrategyAlgorithm(ESBaseAlgorithm):
         assert self.strategy is not None
         for name, value in changed.items():
             if name in self.scheduled_hyperparameters and not callable(value):
-                check_positive(name, value)
+                if (name, value) != ("learning_rate", 0):  # load()'s "no update", as in _changed_hyperparameters
+                    check_positive(name, value)
                 setattr(self.strategy, name, float(value))
             elif name in self.strategy_hyperparameters:
                 setattr(self.strategy, name, value)
