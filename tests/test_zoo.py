@@ -206,6 +206,26 @@ def test_a_schedule_key_that_yaml_read_as_a_string_is_named(key: str, tmp_path: 
     prepare_args("train", ["--algo", "ars_es", "--env", "Pendulum-v1", "-conf", str(conf)])  # a schedule is fine
 
 
+@pytest.mark.parametrize("key", KEYS)
+def test_every_packaged_entry_names_only_what_the_algorithm_or_rl_zoo_takes(key: str) -> None:
+    for env_id in yaml.safe_load(default_conf_file(key).read_text()):
+        prepare_args("train", ["--algo", key, "--env", env_id])  # check_entry_names would raise UsageError
+
+
+def test_a_misspelled_hyperparameter_is_named_with_the_valid_ones(tmp_path: Path) -> None:
+    # rl-zoo would pass it on, and the constructor's TypeError names neither the file nor the valid names
+    train = ["train", "--algo", "ars_es", "--env", "Pendulum-v1"]
+    with pytest.raises(UsageError, match=r"n_dleta is not a hyperparameter of ARS .*: .*n_delta, .*Check the spelling"):
+        prepare_args(train[0], [*train[1:], "-params", "n_dleta:4"])
+    conf = tmp_path / "mine.yml"
+    conf.write_text("Pendulum-v1:\n  policy: 'LinearPolicy'\n  delta_stdd: 0.03\n  n_envs: 2\n")
+    with pytest.raises(UsageError, match=rf"{conf}, entry Pendulum-v1 .*: delta_stdd is not a hyperparameter of ARS"):
+        prepare_args(train[0], [*train[1:], "-conf", str(conf)])
+    conf.write_text("CartPole-v1:\n  policy: 'LinearPolicy'\n")
+    with pytest.raises(UsageError, match=rf"{conf} has no Pendulum-v1 entry and no 'default' entry"):
+        prepare_args(train[0], [*train[1:], "-conf", str(conf)])
+
+
 @pytest.mark.parametrize("command", ["train", "enjoy", "record_video", "push_to_hub", "load_from_hub"])
 def test_old_ars_key_is_refused_with_the_new_one(command: str) -> None:
     with pytest.raises(UsageError, match=r"--algo ars is sb3-contrib's ARS in rl-zoo; sb3-es's ARS is --algo ars_es"):

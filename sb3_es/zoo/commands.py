@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import importlib
+import inspect
 import itertools
 import os
 import runpy
@@ -143,6 +144,41 @@ def check_schedule_strings(conf: str, key: str | None, entry: dict[str, Any]) ->
             )
 
 
+#: Keys of a hyperparameter entry that rl-zoo reads itself and does not pass to the algorithm's constructor.
+ZOO_KEYS = (
+    "n_timesteps",
+    "n_envs",
+    "normalize",
+    "env_wrapper",
+    "vec_env_wrapper",
+    "frame_stack",
+    "callback",
+    "env_kwargs",
+    "monitor_kwargs",
+)
+
+
+def check_entry_names(conf: str, key: str | None, algo: str, names: Sequence[str]) -> None:
+    """
+    Refuse a name in the entry (or in ``-params``) that neither the algorithm's constructor nor rl-zoo takes; rl-zoo
+    would fail with the constructor's ``TypeError``, naming neither the file nor the valid names.
+
+    :param conf: The hyperparameter file.
+    :param key: The entry's key in it.
+    :param algo: The algorithm's rl-zoo key.
+    :param names: The entry's keys and those of ``-params``.
+    """
+    cls = ALGOS[algo]
+    taken = set(inspect.signature(cls.__init__).parameters) - {"self", "env", "_init_setup_model"}
+    unknown = sorted(set(names) - taken - set(ZOO_KEYS))
+    if unknown:
+        raise UsageError(
+            f"{conf}, entry {key} (with -params): {', '.join(unknown)} is not a hyperparameter of {cls.__name__} "
+            f"(--algo {algo}). Its hyperparameters: {', '.join(sorted(taken))}; rl-zoo's own keys: "
+            f"{', '.join(ZOO_KEYS)}. Check the spelling."
+        )
+
+
 def prepare_args(command: str, args: Sequence[str]) -> list[str]:
     """
     Check ``--algo`` and add the sb3-es defaults to rl-zoo's arguments, saying so.
@@ -178,7 +214,14 @@ def prepare_args(command: str, args: Sequence[str]) -> list[str]:
             print(f"sb3-es: {algo} on {env_id}: the values of trial {trial_id} of the study replace the file's")
         if conf.endswith((".yml", ".yaml")) and Path(conf).is_file():
             key, entry = config_entry(conf, env_id)
+            if key is None:
+                raise UsageError(
+                    f"{conf} has no {env_id} entry and no 'default' entry, so rl-zoo has no hyperparameters for "
+                    f"{algo}: add an entry named {env_id} (or default) to it, e.g. copied from "
+                    f"{default_conf_file(algo)}."
+                )
             overrides = _hyperparam_overrides(args)
+            check_entry_names(conf, key, algo, [*entry, *overrides])
             check_schedule_strings(conf, key, {k: v for k, v in entry.items() if k not in overrides})
             if key == "default":
                 used = {**entry, **overrides}
