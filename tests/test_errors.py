@@ -395,8 +395,15 @@ def test_multi_discrete_action_env(algo: Algo) -> None:
 
 @pytest.mark.parametrize("algo", ALGORITHMS)
 def test_unknown_policy_alias(algo: Algo) -> None:
-    with pytest.raises(ValueError, match="CnnPolicy"):
+    names = ", ".join(sorted(algo.cls.policy_aliases))
+    with pytest.raises(ValueError, match=rf"^Policy 'CnnPolicy' unknown: {algo.name}'s policies are {names}, or give"):
         algo.make("Pendulum-v1", 2, policy="CnnPolicy")
+
+
+def test_reinforces_linear_policy_is_an_mlp_without_hidden_layers() -> None:
+    # the other algorithms have a LinearPolicy: the likely mistake gets the equivalent
+    with pytest.raises(ValueError, match=r"A linear policy is MlpPolicy with policy_kwargs=dict\(net_arch=\[\]\)"):
+        REINFORCE("LinearPolicy", "CartPole-v1")
 
 
 class NotFlatPolicy(BasePolicy):

@@ -258,6 +258,20 @@ class ESBaseAlgorithm(BaseAlgorithm):
         :param data: The save's data dictionary.
         """
 
+    def _get_policy_from_name(self, policy_name: str) -> type[BasePolicy]:
+        """SB3's lookup in ``policy_aliases``, with an error that lists the names there."""
+        if policy_name not in self.policy_aliases:
+            hint = (
+                " A linear policy is MlpPolicy with policy_kwargs=dict(net_arch=[])."
+                if policy_name == "LinearPolicy"
+                else ""
+            )
+            raise ValueError(
+                f"Policy {policy_name!r} unknown: {type(self).__name__}'s policies are "
+                f"{', '.join(sorted(self.policy_aliases))}, or give a policy class.{hint}"
+            )
+        return super()._get_policy_from_name(policy_name)
+
     def dump_logs(self, iteration: int = 0) -> None:
         """
         Write the SB3 ``rollout/`` and ``time/`` keys and dump the logger (SB3's ``OnPolicyAlgorithm.dump_logs``).
