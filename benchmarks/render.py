@@ -237,7 +237,7 @@ def main(argv: list[str] | None = None) -> Path:
     parser.add_argument("--algo", default=None, help="rl-zoo key (ppo, ars_es, ...); default: from the save")
     parser.add_argument("--out", type=Path, default=None, help="output .gif or .mp4 (default: <model>.gif)")
     parser.add_argument("--steps", type=int, default=500, help="env steps to record at most")
-    parser.add_argument("--episodes", type=int, default=1, help="stop after this many episodes")
+    parser.add_argument("--episodes", type=int, default=1, help="stop after this many episodes (default: 1)")
     parser.add_argument("--fps", type=int, default=30)
     parser.add_argument("--every", type=int, default=1, help="keep one frame in N (smaller files)")
     parser.add_argument("--seed", type=int, default=0)
