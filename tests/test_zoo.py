@@ -6,6 +6,7 @@ import argparse
 import importlib.util
 import json
 import os
+import pickle
 import re
 import shutil
 import subprocess
@@ -224,6 +225,21 @@ def test_a_misspelled_hyperparameter_is_named_with_the_valid_ones(tmp_path: Path
     conf.write_text("CartPole-v1:\n  policy: 'LinearPolicy'\n")
     with pytest.raises(UsageError, match=rf"{conf} has no Pendulum-v1 entry and no 'default' entry"):
         prepare_args(train[0], [*train[1:], "-conf", str(conf)])
+
+
+def test_plot_from_file_with_a_single_run_is_refused_with_the_fix(tmp_path: Path) -> None:
+    # rl-zoo's plot_from_file skips an algorithm with one run (its last_evals is then a number), then fails with
+    # "min() arg is an empty sequence"
+    results = {"results_table": {}, "Pendulum-v1": {"ARS_ES-logs": {"last_evals": np.float64(-1600.0)}}}
+    (tmp_path / "all_plots.pkl").write_bytes(pickle.dumps(results))
+    with pytest.raises(UsageError, match=r"ARS_ES-logs has a single run, and plot_from_file needs two runs"):
+        prepare_args("plot_from_file", ["-i", str(tmp_path / "all_plots"), "--rliable"])
+    results["HalfCheetah-v5"] = {"ARS_ES-logs": {"last_evals": np.array([3000.0, 3100.0])}}  # two runs on one env
+    (tmp_path / "all_plots.pkl").write_bytes(pickle.dumps(results))
+    assert prepare_args("plot_from_file", ["-i", str(tmp_path / "all_plots.pkl")]) == [
+        "-i",
+        str(tmp_path / "all_plots.pkl"),
+    ]
 
 
 @pytest.mark.parametrize("command", ["train", "enjoy", "record_video", "push_to_hub", "load_from_hub"])

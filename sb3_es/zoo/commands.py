@@ -7,6 +7,7 @@ import importlib
 import inspect
 import itertools
 import os
+import pickle
 import runpy
 import shlex
 import shutil
@@ -16,6 +17,8 @@ import warnings
 from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from sb3_es.strategies.base import parse_number
 from sb3_es.zoo.registry import ALGOS, UsageError, check_algo, config_entry, default_conf_file, is_sb3_es_algo, register
@@ -179,6 +182,30 @@ def check_entry_names(conf: str, key: str | None, algo: str, names: Sequence[str
         )
 
 
+def check_plot_runs(results_file: str) -> None:
+    """
+    Refuse an ``all_plots`` results file in which an algorithm has a single run on every env: rl-zoo's
+    ``plot_from_file`` skips it, then fails with "min() arg is an empty sequence".
+
+    :param results_file: The ``.pkl`` file (``-i``), written by ``all_plots -o``.
+    """
+    path = Path(results_file if results_file.endswith(".pkl") else f"{results_file}.pkl")
+    if not path.is_file():
+        return  # rl-zoo names the missing file
+    with path.open("rb") as file:
+        results = pickle.load(file)  # the user's own all_plots output, as rl-zoo reads it
+    single: dict[str, list[bool]] = {}  # algorithm -> whether each env has a single run (rl-zoo skips those)
+    for env, by_algo in results.items():
+        for algo, result in by_algo.items() if env != "results_table" else ():
+            single.setdefault(algo, []).append(np.ndim(result["last_evals"]) == 0)  # one run: its mean alone
+    for algo, flags in single.items():
+        if all(flags):
+            raise UsageError(
+                f"{path}: {algo} has a single run, and plot_from_file needs two runs (seeds) or more per algorithm. "
+                "Train more seeds (train --seed S, or compare.py --seeds), then run all_plots again."
+            )
+
+
 def prepare_args(command: str, args: Sequence[str]) -> list[str]:
     """
     Check ``--algo`` and add the sb3-es defaults to rl-zoo's arguments, saying so.
@@ -192,6 +219,8 @@ def prepare_args(command: str, args: Sequence[str]) -> list[str]:
     :return: The arguments to give rl-zoo.
     """
     args = list(args)
+    if command == "plot_from_file":
+        check_plot_runs(_option_value(args, ("-i", "--input"), ""))
     if command not in ALGO_COMMANDS:
         return args
     algo = _option_value(args, ("--algo",), "ppo")
