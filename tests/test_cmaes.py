@@ -332,6 +332,28 @@ def test_bipop_runs_large_and_small_regimes() -> None:
     assert np.all(np.isfinite(model.policy.parameters_to_vector()))
 
 
+def test_bipop_small_runs_are_capped_and_do_not_count_as_restarts() -> None:
+    # pycma's fmin: a small-population run gets at most half the evaluations of the large runs so far (maxiter), and
+    # only large runs count against maxrestarts
+    strategy = CMAESStrategy(np.zeros(5), sigma=0.5, restarts="bipop", max_restarts=1, seed=0)
+    strategy._budget = {"large": 2_000, "small": 0}
+    strategy.es.countevals = 500  # the run now ending (small: the first run counts on the small budget)
+    strategy._restart()
+    assert strategy._regime == "small" and strategy.n_restarts == 1
+    assert strategy.es.opts["maxiter"] == int(0.5 * 2_000 / strategy.population_size)
+    assert strategy._restart_left()  # the small run did not use up max_restarts=1
+    strategy.es.countevals = 2_000  # the small budget reaches the large one: a large run next
+    strategy._restart()
+    assert strategy._regime == "large" and strategy.population_size == 2 * strategy.base_population_size
+    assert strategy.es.opts["maxiter"] != int(0.5 * 2_000 / strategy.population_size)  # pycma's default
+    assert not strategy._restart_left()
+    # a user's smaller maxiter stays
+    strategy = CMAESStrategy(np.zeros(5), sigma=0.5, restarts="bipop", cma_options={"maxiter": 3}, seed=0)
+    strategy._budget = {"large": 2_000, "small": 0}
+    strategy._restart()
+    assert strategy._regime == "small" and strategy.es.opts["maxiter"] == 3
+
+
 @pytest.mark.parametrize("key", ["popsize", "seed", "CMA_diagonal"])
 def test_cma_options_set_by_sb3_es_are_rejected(key: str) -> None:
     with pytest.raises(ValueError, match=key):

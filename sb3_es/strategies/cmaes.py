@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
-from sb3_es.strategies.base import Strategy, check_count, check_flag, check_positive_number
+from sb3_es.strategies.base import Strategy, check_count, check_flag, check_positive_number, parse_number
 
 if TYPE_CHECKING:
     import cma
@@ -83,7 +83,9 @@ class CMAESStrategy(Strategy):
     :param diagonal: Separable CMA-ES (diagonal covariance, pycma's ``CMA_diagonal=True``), for large policies.
     :param restarts: ``None``, ``"ipop"`` (population doubles at each restart) or ``"bipop"`` (alternates
         large-population restarts with small-population, small-step ones, Hansen 2009).
-    :param max_restarts: Maximum number of restarts.
+    :param max_restarts: Maximum number of restarts (with BIPOP, of large-population ones: as in pycma's ``fmin``,
+        the small-population runs between them, each capped at half the evaluations of the large ones so far, do
+        not count).
     :param cma_options: Other pycma options, passed through (e.g. ``{"tolfun": 1e-3}``).
     :param seed: Seed of the private random state.
     """
@@ -130,6 +132,7 @@ class CMAESStrategy(Strategy):
         self._budget = {"large": 0, "small": 0}
         self._regime = "small"  # the first run counts on the small budget, as in pycma's fmin and Hansen's code
         self._large_restarts = 0
+        self._small_restarts = 0
         self._solutions: list[np.ndarray] | None = None  # pycma's own list of the candidates asked
         self._exhausted = False
         self._np_state = self._sampling_state()
@@ -188,11 +191,17 @@ class CMAESStrategy(Strategy):
             self._np_state = np.random.get_state()
             np.random.set_state(outer)
 
-    def _new_es(self, x0: np.ndarray, sigma0: float, popsize: int) -> cma.CMAEvolutionStrategy:
+    def _new_es(
+        self, x0: np.ndarray, sigma0: float, popsize: int, maxiter: int | None = None
+    ) -> cma.CMAEvolutionStrategy:
         # pycma's default sampler is the bound method ``np.random.randn``, which pickles with a *copy* of the
         # global random state; a module-level function always reads the current (private, swapped-in) state.
         options = {"popsize": popsize, "CMA_diagonal": self.diagonal, "verbose": -9, "randn": _global_randn}
         options.update(self.cma_options)
+        if maxiter is not None:  # a BIPOP small-population run's cap, below the user's own
+            given = self.cma_options.get("maxiter")
+            user = parse_number(given) if isinstance(given, str) else given  # None: a pycma expression, left out
+            options["maxiter"] = maxiter if user is None else min(maxiter, int(user))
         with self._private_random():
             return _import_cma().CMAEvolutionStrategy(x0, sigma0, options)
 
@@ -216,7 +225,8 @@ class CMAESStrategy(Strategy):
         return float(self.es.sigma)
 
     def _restart_left(self) -> bool:
-        return self.restarts is not None and self.n_restarts < self.max_restarts
+        # As in pycma's fmin, BIPOP's small-population runs do not count against max_restarts.
+        return self.restarts is not None and self.n_restarts - self._small_restarts < self.max_restarts
 
     def _ask(self) -> np.ndarray:
         if self._exhausted and self._restart_left():  # stopped with no restart left; max_restarts was raised since
@@ -251,6 +261,7 @@ class CMAESStrategy(Strategy):
         self.n_restarts += 1
         self._budget[self._regime] += int(self.es.countevals)
         base = self.base_population_size
+        maxiter: int | None = None
         if self.restarts == "ipop":
             popsize, sigma0, regime = 2 * self.population_size, self.sigma0, "large"
         else:  # BIPOP: run the regime that has used less of the evaluation budget so far
@@ -259,11 +270,16 @@ class CMAESStrategy(Strategy):
                 self._large_restarts += 1
                 popsize, sigma0 = base * 2**self._large_restarts, self.sigma0
             else:
+                self._small_restarts += 1
                 ratio = 0.5 * 2**self._large_restarts
                 popsize = max(self.min_population_size, int(base * ratio ** (self.rng.uniform() ** 2)))
                 sigma0 = self.sigma0 * 10 ** (-2 * self.rng.uniform())
+                # At most half the evaluations of the large runs so far, as in pycma's fmin: a local search whose
+                # stop conditions never fire (noisy returns) cannot use up the training budget.
+                maxiter = max(1, int(0.5 * self._budget["large"] / popsize))
         self._regime = regime
-        self.es, self._solutions = self._new_es(self.best_params, sigma0, popsize), None
+        self.es = self._new_es(self.best_params, sigma0, popsize, maxiter)
+        self._solutions = None
         self.center = np.asarray(self.es.mean, dtype=np.float64).copy()
 
     def set_center(self, center: np.ndarray) -> None:
@@ -276,4 +292,5 @@ class CMAESStrategy(Strategy):
     def __setstate__(self, state: dict[str, Any]) -> None:
         if "_solutions" not in state:  # before version 2, pycma's list was "_asked" (now the base class's own)
             state["_solutions"] = state.pop("_asked", None)
+        state.setdefault("_small_restarts", 0)  # saved before small restarts were counted apart
         super().__setstate__(state)
