@@ -68,6 +68,24 @@ def test_evaluator_processes_from_env_id() -> None:
     assert wait_gone(pids)
 
 
+def test_a_loop_over_seeds_stops_each_dropped_models_workers() -> None:
+    """The seed loop of the docs: each model dropped (kept until the garbage collector runs, by a reference cycle) has
+    its workers stopped when the next model starts its own, by the process that started them, never by a forked
+    worker that inherited a copy of it ("can only test a child process")."""
+    script = (
+        "import multiprocessing as mp\n"
+        "from sb3_es import ARS\n"
+        "for seed in range(3):\n"
+        "    model = ARS('LinearPolicy', 'Pendulum-v1', n_delta=2, seed=seed, evaluator='processes')\n"
+        "    model.learn(1)\n"
+        "    print(len(mp.active_children()), flush=True)\n"
+    )
+    result = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.split() == [str(usable_cpus())] * 3
+    assert "Exception ignored" not in result.stderr and "AssertionError" not in result.stderr
+
+
 def test_one_worker_is_the_local_engine() -> None:
     """One worker with the default env slots runs the local engine on a VecEnv of that many envs, bit for bit."""
     local = ARS("LinearPolicy", make_vec_env("Pendulum-v1", n_envs=DEFAULT_ENVS_PER_WORKER), n_delta=2, seed=3)

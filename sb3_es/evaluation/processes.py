@@ -15,6 +15,7 @@ their pipe closes, and are daemons, so that none outlives the driver.
 
 from __future__ import annotations
 
+import gc
 import math
 import multiprocessing as mp
 import os
@@ -60,6 +61,7 @@ class ProcessPool(WorkerPool):
         self._tables: list[set[tuple[int, int]]] = []
         self._known_tables: dict[tuple[int, int], SharedNoiseTable] = {}
         self._inbox: dict[int, tuple[Any, ...]] = {}  # a share's reply received while waiting for "done"
+        self._owner = os.getpid()  # the process that starts the workers: the only one that may stop them
 
     @property
     def started(self) -> bool:
@@ -68,6 +70,11 @@ class ProcessPool(WorkerPool):
     def start(self) -> None:
         if self.processes:
             return
+        # A model dropped in a reference cycle (a loop over seeds) keeps its workers until the garbage collector runs:
+        # collected here, its pool closes its workers now, in this process, instead of being copied into the new
+        # workers by the fork, where its finalizer would run on processes that are not their children.
+        gc.collect()
+        self._owner = os.getpid()
         n = self.num_workers
         self.processes, self._conns = [None] * n, [None] * n
         self._stops = [self._ctx.RawValue("q", 0) for _ in range(n)]
@@ -124,6 +131,9 @@ class ProcessPool(WorkerPool):
         raise WorkerDied(f"worker process {process.pid} ended with exit code {process.exitcode}")
 
     def close(self) -> None:
+        if os.getpid() != self._owner:  # a copy inherited by a forked process: the workers are not its children
+            self.processes, self._conns, self._stops, self._tables, self._inbox = [], [], [], [], {}
+            return
         for k, process in enumerate(self.processes):
             if process is None:
                 continue
