@@ -195,4 +195,4 @@ def describe_pools() -> str:
     if not running:
         return "no other Ray evaluator of this process holds actors"
     held = sum(pool.cpus for pool in running)
-    return f"Ray evaluators of this process hold {held:g} CPU(s) in {len(running)} pool(s)"
+    return f"Ray evaluators of this process hold or are starting actors for {held:g} CPU(s) in {len(running)} pool(s)"
