@@ -182,7 +182,7 @@ def test_evaluator_processes_from_a_vec_env(monkeypatch: pytest.MonkeyPatch, tmp
         ARS("LinearPolicy", VecNormalize(make_vec_env("Pendulum-v1")), evaluator="processes")
     with pytest.raises(ValueError, match="wrapper.*TimeFeatureWrapper do not record their constructor arguments"):
         ARS("LinearPolicy", make_vec_env("Pendulum-v1", wrapper_class=TimeFeatureWrapper), evaluator="processes")
-    with pytest.raises(ValueError, match="not built by gym.make"):
+    with pytest.raises(ValueError, match="not built by gym.make .*: give a registered env id instead, or pass"):
         ARS("LinearPolicy", ToyEnv(), evaluator="processes")
 
 

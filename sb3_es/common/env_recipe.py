@@ -83,9 +83,9 @@ def env_recipe(env: VecEnv, evaluator: str) -> tuple[functools.partial[gym.Env],
     """
     specs: list[EnvSpec | None] = env.get_attr("spec")
     spec = specs[0]
-    env_id = spec.id if spec is not None else "<env id>"
+    registered = f"the env id instead (env={spec.id!r})" if spec is not None else "a registered env id instead"
     fix = (
-        f"give the env id instead (env={env_id!r}), or pass evaluator=ProcessEvaluator(env_factory) / "
+        f"give {registered}, or pass evaluator=ProcessEvaluator(env_factory) / "
         f"RayEvaluator(env_factory) built with a factory for your envs (evaluator={evaluator!r} builds every "
         f"worker's envs itself)"
     )
