@@ -387,6 +387,17 @@ def test_unknown_env_id(algo: Algo) -> None:
 
 
 @pytest.mark.parametrize("algo", ALGORITHMS)
+def test_unbounded_box_action_env(algo: Algo) -> None:
+    # SB3's own check is a bare AssertionError: each algorithm checks first, naming the fix
+    env = MultiDiscreteActionEnv()
+    env.action_space = gym.spaces.Box(-np.inf, np.inf, shape=(2,), dtype=np.float32)  # type: ignore[assignment]
+    with pytest.raises(
+        ValueError, match=r"^Unsupported action space Box\(-inf, inf.*: (the )?Box bounds must be finite"
+    ):
+        algo.make(env, 2)
+
+
+@pytest.mark.parametrize("algo", ALGORITHMS)
 def test_multi_discrete_action_env(algo: Algo) -> None:
     with pytest.raises(ValueError, match="MultiDiscrete") as info:
         algo.make(MultiDiscreteActionEnv(), 2)

@@ -160,6 +160,8 @@ class ESBaseAlgorithm(BaseAlgorithm):
             if not is_wrapped(env, gym.wrappers.TimeLimit):
                 self._added_time_limit = self.max_episode_steps or DEFAULT_MAX_EPISODE_STEPS
                 env = gym.wrappers.TimeLimit(env, self._added_time_limit)
+        if env is not None and hasattr(env, "action_space"):
+            self._check_action_space(env.action_space)  # before SB3's bare assertion on Box bounds
         if isinstance(policy, str):
             policy = self._get_policy_from_name(policy)
         super().__init__(
@@ -257,6 +259,10 @@ class ESBaseAlgorithm(BaseAlgorithm):
         :param path: The file, for error messages.
         :param data: The save's data dictionary.
         """
+
+    @staticmethod
+    def _check_action_space(action_space: gym.Space) -> None:
+        """Raise a clear ``ValueError`` for an action space that the algorithm's policies do not support."""
 
     def _get_policy_from_name(self, policy_name: str) -> type[BasePolicy]:
         """SB3's lookup in ``policy_aliases``, with an error that lists the names there."""

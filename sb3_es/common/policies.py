@@ -37,6 +37,26 @@ from sb3_es.strategies.base import check_flag
 __all__ = ["OBS_NORM_EPS", "FlatPolicy", "LinearPolicy", "MlpPolicy", "flat_obs_dim"]
 
 
+def check_action_space(action_space: spaces.Space) -> None:
+    """
+    Raise a clear ``ValueError`` for an action space that :class:`FlatPolicy` does not support.
+
+    :param action_space: The env's action space.
+    """
+    if isinstance(action_space, spaces.Box):
+        if not np.all(np.isfinite(action_space.low)) or not np.all(np.isfinite(action_space.high)):
+            raise ValueError(
+                f"Unsupported action space {action_space}: Box bounds must be finite (a policy's actions are squashed "
+                "or clipped into them). Give the env the bounds of the actions it accepts, e.g. with a "
+                "gymnasium.ActionWrapper that sets action_space = Box(low, high)."
+            )
+    elif not isinstance(action_space, spaces.Discrete):
+        raise ValueError(
+            f"Unsupported action space {action_space}: sb3-es policies support Box and Discrete actions. "
+            "For MultiDiscrete or MultiBinary actions, wrap the env to expose a Discrete or Box space."
+        )
+
+
 class FlatPolicy(BasePolicy):
     """
     Deterministic MLP (or linear) policy whose parameters form one flat vector.
@@ -71,19 +91,14 @@ class FlatPolicy(BasePolicy):
         layer_norm: bool = False,
         normalize_observations: bool = True,
     ) -> None:
-        if isinstance(action_space, spaces.Box):
-            if not np.all(np.isfinite(action_space.low)) or not np.all(np.isfinite(action_space.high)):
-                raise ValueError(f"Unsupported action space {action_space}: Box bounds must be finite.")
-            action_dim = int(np.prod(action_space.shape))
-        elif isinstance(action_space, spaces.Discrete):
-            action_dim = int(action_space.n)
-        else:
-            raise ValueError(
-                f"Unsupported action space {action_space}: sb3-es policies support Box and Discrete actions. "
-                "For MultiDiscrete or MultiBinary actions, wrap the env to expose a Discrete or Box space."
-            )
-        obs_dim = flat_obs_dim(observation_space)
+        check_action_space(action_space)
         is_box = isinstance(action_space, spaces.Box)
+        if isinstance(action_space, spaces.Box):
+            action_dim = int(np.prod(action_space.shape))
+        else:
+            assert isinstance(action_space, spaces.Discrete)
+            action_dim = int(action_space.n)
+        obs_dim = flat_obs_dim(observation_space)
         with_bias = check_flag("with_bias", with_bias)
         squash_output = check_flag("squash_output", squash_output)
         pi_arch, vf_arch = split_net_arch(net_arch)

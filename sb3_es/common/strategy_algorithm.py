@@ -18,7 +18,7 @@ from stable_baselines3.common.vec_env import VecEnv, unwrap_vec_normalize
 
 from sb3_es.common.base_class import ESBaseAlgorithm
 from sb3_es.common.checks import check_policy_class, check_positive, check_scheduled_value
-from sb3_es.common.policies import FlatPolicy
+from sb3_es.common.policies import FlatPolicy, check_action_space
 from sb3_es.strategies import Strategy
 from sb3_es.strategies.base import Population, check_count
 from sb3_es.strategies.noise import SharedNoiseTable
@@ -86,6 +86,7 @@ class StrategyAlgorithm(ESBaseAlgorithm):
     #: Hyperparameters the strategy keeps under the same name and that ``load()`` may change: the strategy checks
     #: the new values (``Strategy.check_settings``) and uses them from the next generation on.
     strategy_hyperparameters: ClassVar[tuple[str, ...]] = ()
+    _check_action_space = staticmethod(check_action_space)
 
     def _setup_model(self) -> None:
         if self.learning_rate is not None:

@@ -93,6 +93,7 @@ class REINFORCE(ESBaseAlgorithm):
         "MultiInputPolicy": MultiInputPolicy,
     }
     policy: DiscretizedPolicy
+    _check_action_space = staticmethod(check_action_space)
     _live_hyperparameters: ClassVar[tuple[str, ...]] = (
         *ESBaseAlgorithm._live_hyperparameters,
         "learning_rate",  # SB3's load() rebuilds lr_schedule; the optimizer takes it at every update
@@ -155,11 +156,7 @@ class REINFORCE(ESBaseAlgorithm):
                 f"value_net_arch={value_net_arch!r} gives the layers of REINFORCE's baseline, which is off: pass "
                 "use_baseline=True to REINFORCE, or drop value_net_arch."
             )
-        if env is not None and not isinstance(env, str) and hasattr(env, "action_space"):
-            check_action_space(env.action_space)
         super().__init__(**base_arguments(super().__init__, locals()))
-        if self.env is not None:
-            check_action_space(self.action_space)
         self.n_episodes = int(n_episodes)
         self.gamma = float(gamma)
         self.normalize_returns = check_flag("normalize_returns", normalize_returns)
