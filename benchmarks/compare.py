@@ -20,12 +20,13 @@ Examples::
     python -m sb3_es.zoo plot_from_file -i results/pendulum/all_plots.pkl --rliable --iqm
 
 Runs are sequential, one process, with a progress line. Algorithm keys are rl-zoo's (``ppo``, ``sac``, ``ars`` for
-sb3-contrib's ARS, ...) and sb3-es's (``ars_es``, ``openes``, ``cmaes``, ``reinforce``). Hyperparameters: the
-packaged ``sb3_es/hyperparams/<algo>.yml`` for the sb3-es algorithms, rl-zoo3's own ``hyperparams/<algo>.yml`` for
-the others. When rl-zoo3 has no entry for an env id but has one for an older version (``Hopper-v4`` for
-``Hopper-v5``) that entry is used, otherwise rl-zoo3's ``default``; for Dict observations (dm_control) a
-``FlattenObservation`` wrapper is added. The hyperparameters used are written to ``configs/``. Models, envs and
-``VecNormalize`` come from rl-zoo3's ``ExperimentManager``.
+sb3-contrib's ARS, ...) and sb3-es's (``ars_es``, ``openes``, ``cmaes``, ``pgpe``, ``simple_es``, ``reinforce``).
+Hyperparameters: the packaged ``sb3_es/hyperparams/<algo>.yml`` for the sb3-es algorithms, rl-zoo3's own
+``hyperparams/<algo>.yml`` for the others. When rl-zoo3 has no entry for an env id but has one for an older version
+(``Hopper-v4`` for ``Hopper-v5``) that entry is used, otherwise rl-zoo3's ``default``; for Dict observations
+(dm_control) a ``FlattenObservation`` wrapper is added. The rl-zoo3 entries used are written to ``configs/``; the
+values a run used, ``--override`` applied, are in its ``summary.json`` and rl-zoo's ``<env>/config.yml``. Models,
+envs and ``VecNormalize`` come from rl-zoo3's ``ExperimentManager``.
 
 Every ``--eval-freq`` env steps, and at the start and the end of training, SB3's ``EvalCallback`` evaluates the
 current policy (deterministic, ``--eval-episodes`` episodes on a separate env), writes ``eval/mean_reward`` to
@@ -46,7 +47,7 @@ Output folder layout::
                                           evaluations.npz, best_model.zip, last_model.zip, summary.json
                                           (wall-clock, steps taken, confirmations), confirmed_model.zip
     tb/<env>/<RUN>_<n>/                   TensorBoard runs side by side (tensorboard --logdir <out>/tb)
-    configs/<algo>-<env>.yml              hyperparameters used for rl-zoo3's algorithms
+    configs/<algo>-<env>.yml              rl-zoo3's entries used for its algorithms, before --override
     plots/<env>-wallclock.png             mean return against training wall-clock, band over seeds
     results.md                            race table: steps taken, time, final return, time to threshold
 """
@@ -55,6 +56,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import inspect
 import io
 import json
 import math
@@ -79,12 +81,15 @@ from stable_baselines3.common.evaluation import evaluate_policy
 from stable_baselines3.common.utils import set_random_seed
 from stable_baselines3.common.vec_env import VecEnv
 
+from sb3_es.strategies.base import parse_number
+
 try:
     import rl_zoo3
     from rl_zoo3.exp_manager import ExperimentManager
     from rl_zoo3.utils import get_wrapper_class
 
     from sb3_es.zoo import RENAMED, UsageError, check_algo, default_conf_file, register, sb3_es_algos
+    from sb3_es.zoo.commands import ZOO_KEYS
     from sb3_es.zoo.registry import zoo_meaning
 except ImportError as e:  # pragma: no cover
     raise SystemExit(f"benchmarks/compare.py needs rl_zoo3: pip install 'sb3-es[zoo]' ({e})") from e
@@ -541,8 +546,17 @@ def run_one(
     if train_wrapper is not None:
         note += f"; training envs only: {train_wrapper}"
     setup_log = io.StringIO()
-    with contextlib.redirect_stdout(setup_log if verbose == 0 else sys.stdout):
-        result = manager.setup_experiment()
+    try:
+        with contextlib.redirect_stdout(setup_log if verbose == 0 else sys.stdout):
+            result = manager.setup_experiment()
+    except (TypeError, ValueError, KeyError) as e:
+        if continue_from is None:
+            raise
+        # e.g. a PPO run given an ARS model: the policy's constructor refuses PPO's arguments
+        raise ValueError(
+            f"--continue-from {continue_from}: {algo} cannot load it ({type(e).__name__}: {e}); give a model saved "
+            f"by {algo}."
+        ) from e
     assert result is not None
     (folder / "setup.txt").write_text(setup_log.getvalue())
     model, hyperparams = result
@@ -782,6 +796,11 @@ def write_report(out: Path, runs: list[dict[str, Any]], thresholds: dict[str, fl
         "- Returns: mean over the evaluation episodes of the deterministic policy; across seeds, mean ± std.",
         "  *final*: last evaluation; *env steps*: taken (a run ends within one generation or rollout past its",
         "  budget); wall-clock excludes evaluations.",
+        *[
+            f"- **Failed** (no result, `--keep-going`): `{error.parent.relative_to(out)}`, see its `error.txt`"
+            for error in sorted((out / "logs").glob("*/*_seed*/error.txt"))
+            if not (error.parent / "summary.json").is_file()
+        ],
         "",
     ]
     by_env: dict[str, list[dict[str, Any]]] = defaultdict(list)
@@ -808,9 +827,15 @@ def write_report(out: Path, runs: list[dict[str, Any]], thresholds: dict[str, fl
             budget = " and ".join(
                 x for x in (f"{b_steps:,} env steps" if b_steps else "", f"{b_seconds:g} s" if b_seconds else "") if x
             )
-            lines.append(
-                f"Budget: {budget}; evaluation every {freq:,} env steps, {episodes} episodes; torch threads: {threads}."
-            )
+            every = f"every {freq:,} env steps" if freq else "at the start and the end"
+            lines.append(f"Budget: {budget}; evaluation {every}, {episodes} episodes; torch threads: {threads}.")
+        for run in sorted(env_runs, key=lambda r: (r["algo"], r["seed"])):
+            if run.get("continued_from"):
+                lines.append(
+                    f"{run['algo']} seed {run['seed']} continued `{run['continued_from']['model']}` from "
+                    f"{run['continued_from']['env_steps']:,} env steps: its env steps count from the first run's "
+                    "start, its wall-clock from this run's."
+                )
         lines += ["", header, rule]
         by_algo: dict[str, list[dict[str, Any]]] = defaultdict(list)
         for run in env_runs:
@@ -884,9 +909,10 @@ def parse_thresholds(items: list[str]) -> dict[str, float]:
     thresholds = {}
     for item in items:
         env_id, sep, value = item.rpartition("=")
-        if not sep:
-            raise SystemExit(f"--threshold {item!r}: use ENV_ID=VALUE, e.g. Pendulum-v1=-200")
-        thresholds[env_id] = float(value)
+        number = parse_number(value) if sep else None
+        if number is None:
+            raise SystemExit(f"--threshold {item!r}: use ENV_ID=VALUE with a number, e.g. Pendulum-v1=-200")
+        thresholds[env_id] = number
     return thresholds
 
 
@@ -918,6 +944,23 @@ def check_run_arguments(args: argparse.Namespace, thresholds: dict[str, float], 
     missing = [algo for algo in args.algos if algo not in rl_zoo3.ALGOS]
     if missing:
         problems.append(f"--algos {missing}: unknown or unavailable (known: {sorted(rl_zoo3.ALGOS)})")
+    for env_id in args.envs:  # checked before any run, not when its turn comes after hours of others
+        try:
+            gym.spec(env_id)
+        except gym.error.Error as e:
+            problems.append(f"--envs {env_id}: {e}")
+    for algo, values in overrides.items():
+        if algo not in rl_zoo3.ALGOS:
+            continue
+        # rl-zoo passes every other key to the constructor, whose TypeError would end the batch at that run
+        params = set(inspect.signature(rl_zoo3.ALGOS[algo].__init__).parameters) - {"self", "env", "_init_setup_model"}
+        zoo_keys = [*ZOO_KEYS, *(() if algo in sb3_es_algos() else ("noise_type", "noise_std"))]
+        unknown = sorted(set(values) - params - set(zoo_keys))
+        if unknown:
+            problems.append(
+                f"--override {algo}:{unknown[0]}: {', '.join(unknown)} is not a hyperparameter of "
+                f"{rl_zoo3.ALGOS[algo].__name__} (its: {', '.join(sorted(params))}; rl-zoo's: {', '.join(zoo_keys)})"
+            )
     if args.continue_from is not None:
         # A run folder of this script, <algo>/<env>_1_seed<s>, names the env the model was trained on.
         trained = re.fullmatch(r"(.+)_\d+_seed(\d+)", args.continue_from.parent.name)
@@ -949,7 +992,10 @@ def main(argv: list[str] | None = None) -> Path:
     parser.add_argument("--steps", type=step_count, default=None, help="env-step budget per run")
     parser.add_argument("--seconds", type=float, default=None, help="training wall-clock budget per run")
     parser.add_argument(
-        "--eval-freq", type=step_count, default=10_000, help="env steps between evaluations (0: end only)"
+        "--eval-freq",
+        type=step_count,
+        default=10_000,
+        help="env steps between evaluations (0: at the start and the end only)",
     )
     parser.add_argument("--eval-episodes", type=int, default=5)
     parser.add_argument("--out", default="results/compare", help="output folder")
@@ -1097,6 +1143,8 @@ def main(argv: list[str] | None = None) -> Path:
         raise SystemExit(f"No finished runs under {out / 'logs'}.")
     report = write_report(out, runs, thresholds, args.band, command)
     print(f"Report: {report}\nPlots: {out / 'plots'}\nTensorBoard: tensorboard --logdir {out / 'tb'}")
+    if not args.report_only and failures:
+        raise SystemExit(f"compare.py: {len(failures)} run(s) failed (--keep-going): {', '.join(failures)}.")
     return report
 
 

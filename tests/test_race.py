@@ -144,6 +144,10 @@ def test_a_run_continues_from_its_last_model(tmp_path: Any) -> None:
         (["--steps", "100", "--threshold", "CartPol-v1=4", "--threshold", "CartPole-v1=4"], r"\['CartPol-v1'\], which"),
         (["--steps", "100", "--override", "ars_es:n_timesteps=100"], r"n_timesteps with --steps"),
         (["--steps", "100", "--algos", "ars_es", "ppo_typo"], r"--algos \['ppo_typo'\]: unknown"),
+        # checked before the runs, not when their turn comes
+        (["--steps", "100", "--envs", "CartPole-v1", "Pendulum-v9"], r"--envs Pendulum-v9: Environment version"),
+        (["--steps", "100", "--override", "ars_es:n_deltaa=4"], r"ars_es:n_deltaa: n_deltaa is not a hyperparameter"),
+        (["--steps", "100", "--threshold", "CartPole-v1=abc"], r"use ENV_ID=VALUE with a number"),
         (
             ["--steps", "100", "--continue-from", "r/logs/ars_es/Pendulum-v1_1_seed0/last_model.zip"],
             r"was trained on Pendulum-v1, not on --envs \['CartPole-v1'\]",
@@ -159,6 +163,16 @@ def test_compare_refuses_what_it_would_ignore(extra: list[str], message: str, tm
     with pytest.raises(SystemExit, match=message):
         load_script("compare").main(base + extra)
     assert not (tmp_path / "logs").exists()  # refused before any run
+
+
+def test_compare_keep_going_reports_the_failed_runs_and_fails(tmp_path: Any) -> None:
+    # a run that fails at its start (n_delta=0 is refused by ARS) is recorded, the others run, the exit says so
+    args = ["--algos", "cmaes", "ars_es", "--envs", "CartPole-v1", "--steps", "100", "--eval-freq", "0"]
+    with pytest.raises(SystemExit, match=r"1 run\(s\) failed \(--keep-going\): \[2/2\] ars_es CartPole-v1 seed 0"):
+        load_script("compare").main([*args, "--override", "ars_es:n_delta=0", "--keep-going", "--out", str(tmp_path)])
+    report = (tmp_path / "results.md").read_text()
+    assert "| cmaes (CMAES) | 1 (0) |" in report
+    assert "**Failed** (no result, `--keep-going`): `logs/ars_es/CartPole-v1_1_seed0`, see its `error.txt`" in report
 
 
 @pytest.mark.parametrize(
