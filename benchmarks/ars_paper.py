@@ -41,6 +41,9 @@ PRESETS: dict[str, dict[str, Any]] = {
 }
 
 
+#: ``--variants``: whether the policy normalizes its observations.
+VARIANTS = {"V1": False, "V2": True}
+
 #: ``--policy`` choices: policy class and its keyword arguments (observation normalization is set by the variant).
 POLICIES: dict[str, tuple[str, dict[str, Any]]] = {
     "linear": ("LinearPolicy", {}),
@@ -64,7 +67,7 @@ def run(
     Train one ARS run and evaluate it periodically.
 
     :param env_id: A key of :data:`PRESETS`.
-    :param variant: ``"V1"`` or ``"V2"``.
+    :param variant: A key of :data:`VARIANTS`.
     :param seed: Random seed.
     :param steps: Env-step budget.
     :param eval_every: Env steps between evaluations.
@@ -86,12 +89,13 @@ def run(
         learning_rate=preset["learning_rate"],
         alive_bonus_offset=preset["alive"],
         seed=seed,
-        policy_kwargs=dict(policy_kwargs, normalize_observations=variant == "V2"),
+        policy_kwargs=dict(policy_kwargs, normalize_observations=VARIANTS[variant]),
     )
     start = time.perf_counter()
     history: list[tuple[int, int, float]] = []
     episodes = 0
-    while model.num_timesteps < steps and time.perf_counter() - start < max_seconds:
+    # one evaluation at least, however short the wall-clock limit
+    while not history or (model.num_timesteps < steps and time.perf_counter() - start < max_seconds):
         model.learn(eval_every, reset_num_timesteps=False)
         episodes = model._n_updates * 2 * preset["n_delta"]  # one episode per candidate
         mean, _ = evaluate_policy(model, eval_env, n_eval_episodes=5)
@@ -112,25 +116,73 @@ def run(
     }
 
 
-def main() -> None:
+def variant_list(text: str) -> list[str]:
+    """
+    An ``argparse`` type for ``--variants``: comma-separated keys of :data:`VARIANTS`.
+
+    :param text: The value as typed.
+    :return: The variants.
+    """
+    variants = text.split(",")
+    unknown = [v for v in variants if v not in VARIANTS]
+    if unknown:
+        raise argparse.ArgumentTypeError(
+            f"unknown variant {', '.join(map(repr, unknown))}; give {' or '.join(VARIANTS)}, comma-separated"
+        )
+    return variants
+
+
+def seed_list(text: str) -> list[int]:
+    """
+    An ``argparse`` type for ``--seeds``: comma-separated integers.
+
+    :param text: The value as typed.
+    :return: The seeds.
+    """
+    try:
+        return [int(s) for s in text.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a list of seeds; give integers such as 0,1,2") from None
+
+
+def main(argv: list[str] | None = None) -> None:
+    """
+    Run each variant and seed, printing one table row per run.
+
+    :param argv: Arguments (defaults to ``sys.argv[1:]``).
+    """
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--env", choices=sorted(PRESETS), default="Swimmer-v5")
     parser.add_argument("--steps", type=step_count, default=300_000)
     parser.add_argument("--max-seconds", type=float, default=float("inf"))
     parser.add_argument("--eval-every", type=step_count, default=20_000)
-    parser.add_argument("--seeds", default="237,759,959,0")
+    parser.add_argument("--seeds", type=seed_list, default=[237, 759, 959, 0], help="comma-separated")
     parser.add_argument("--n-envs", type=int, default=2)
-    parser.add_argument("--variants", default="V1,V2")
+    parser.add_argument(
+        "--variants", type=variant_list, default=list(VARIANTS), help=f"comma-separated, of {', '.join(VARIANTS)}"
+    )
     parser.add_argument("--policy", choices=sorted(POLICIES), default="linear")
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
+    problems = [
+        f"{flag} {value:g}: it must be positive"
+        for flag, value in (
+            ("--steps", args.steps),
+            ("--max-seconds", args.max_seconds),
+            ("--eval-every", args.eval_every),
+            ("--n-envs", args.n_envs),
+        )
+        if not value > 0  # nan too
+    ]
+    if problems:
+        parser.error("; ".join(problems) + ".")
     print(f"hardware: {hardware()}; versions: {versions()}")
     threshold = PAPER_THRESHOLDS[args.env]
     print(f"command: python {' '.join(sys.argv)}")
     print(f"policy: {args.policy} {POLICIES[args.policy]}")
     print(f"| env | variant | seed | env steps (episodes) to {threshold:g} | best eval | final eval | steps | s |")
     print("|---|---|---|---|---|---|---|---|")
-    for variant in args.variants.split(","):
-        for seed in (int(s) for s in args.seeds.split(",")):
+    for variant in args.variants:
+        for seed in args.seeds:
             row = run(args.env, variant, seed, args.steps, args.eval_every, args.n_envs, args.max_seconds, args.policy)
             first = "not reached" if row["first"] is None else f"{row['first'][0]} ({row['first'][1]})"
             print(

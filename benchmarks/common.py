@@ -43,6 +43,20 @@ PAPER_THRESHOLDS = {
 SB3_VERSIONS = ("Python", "Stable-Baselines3", "PyTorch", "Numpy", "Gymnasium")
 
 
+def algorithm_classes(base: type) -> dict[str, Any]:
+    """
+    sb3-es's algorithm classes by name, for a script's ``--algo``.
+
+    :param base: Only the subclasses of this class (``BaseAlgorithm``: all).
+    :return: ``{"ARS": ARS, ...}``.
+    """
+    return {
+        name: cls
+        for name, cls in vars(sb3_es).items()
+        if name in sb3_es.__all__ and isinstance(cls, type) and issubclass(cls, base)
+    }
+
+
 def read_value(text: str) -> Any:
     """
     Read a command-line value as YAML (numbers, booleans, lists, ``lin_0.01``, ``"dict(...)"``), and numbers in

@@ -13,19 +13,56 @@ Prints one line per seed and budget, and the median at each budget; writes ``<ou
 from __future__ import annotations
 
 import argparse
+import inspect
 import json
-import subprocess
 import time
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import torch
-from common import read_value, step_count, system_info
+from common import algorithm_classes, read_value, selection_problems, source_commit, step_count, system_info
+from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.evaluation import evaluate_policy
 
-import sb3_es
+#: ``--algo`` choices: sb3-es's algorithm classes by name.
+ALGORITHMS: dict[str, type[BaseAlgorithm]] = algorithm_classes(BaseAlgorithm)
+#: Constructor arguments that ``--set`` may not give: the script's own flags set them.
+OWN_FLAGS = {"policy": "--policy", "env": "--env", "seed": "--seeds"}
+
+
+def key_value(text: str) -> tuple[str, Any]:
+    """
+    An ``argparse`` type for ``--set``: ``KEY=VALUE``, the value read as YAML (:func:`common.read_value`).
+
+    :param text: The item as typed.
+    :return: The key and the value.
+    """
+    key, sep, value = text.partition("=")
+    if not sep or not key:
+        raise argparse.ArgumentTypeError(f"{text!r} is not KEY=VALUE; give one such as n_delta=16")
+    return key, read_value(value)
+
+
+def set_problems(algo: str, items: list[tuple[str, Any]]) -> list[str]:
+    """
+    :param algo: A key of :data:`ALGORITHMS`.
+    :param items: ``--set`` items.
+    :return: What the constructor would refuse with a TypeError, or the script would silently drop: keys it does not
+        take, keys the script's own flags set, repeated keys.
+    """
+    keys = [key for key, _ in items]
+    taken = set(inspect.signature(ALGORITHMS[algo].__init__).parameters) - {"self", "_init_setup_model"}
+    problems = [f"--set {key}: give it with {OWN_FLAGS[key]}" for key in keys if key in OWN_FLAGS]
+    unknown = [key for key in keys if key not in taken]
+    if unknown:
+        allowed = ", ".join(sorted(taken - set(OWN_FLAGS)))
+        problems.append(f"--set {', '.join(unknown)}: not a constructor argument of {algo} (it takes {allowed})")
+    repeated = sorted({key for key in keys if keys.count(key) > 1})
+    if repeated:
+        problems.append(f"--set repeats {repeated}: give each key once")
+    return problems
 
 
 def run(
@@ -39,7 +76,7 @@ def run(
 
     :return: One row per budget: seed, steps, training wall-clock and the evaluation's mean and std.
     """
-    model = getattr(sb3_es, algo)(policy, env_id, seed=seed, **kwargs)
+    model = ALGORITHMS[algo](policy, env_id, seed=seed, **kwargs)
     rows, train_s = [], 0.0
     for budget in budgets:
         start = time.perf_counter()
@@ -61,21 +98,39 @@ def run(
     return rows
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
+    """
+    Train and evaluate each seed, print the medians and write ``headline.json``.
+
+    :param argv: Arguments (defaults to ``sys.argv[1:]``).
+    """
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--algo", default="ARS")
+    parser.add_argument("--algo", choices=sorted(ALGORITHMS), default="ARS", help="an sb3-es algorithm class")
     parser.add_argument("--policy", default="MlpPolicy")
     parser.add_argument("--env", default="BipedalWalker-v3")
     parser.add_argument("--steps", nargs="+", type=step_count, default=[1_000_000], help="budgets at which to evaluate")
     parser.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
     parser.add_argument("--episodes", type=int, default=10)
     parser.add_argument(
-        "--set", nargs="+", action="extend", default=[], help="KEY=VALUE constructor arguments, as YAML (repeatable)"
+        "--set",
+        nargs="+",
+        action="extend",
+        type=key_value,
+        default=[],
+        help="KEY=VALUE constructor arguments, as YAML (repeatable)",
     )
     parser.add_argument("--out", default="results/headline")
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
+    problems = [f"--steps {b}: it must be positive" for b in args.steps if b <= 0]
+    if len(set(args.steps)) < len(args.steps):
+        problems.append(f"--steps repeats a budget ({' '.join(map(str, args.steps))}): give each once")
+    if args.episodes < 1:
+        problems.append(f"--episodes {args.episodes}: it must be at least 1")
+    problems += selection_problems(args.seeds, [args.env], {}) + set_problems(args.algo, args.set)
+    if problems:
+        parser.error("; ".join(problems) + ".")
     torch.set_num_threads(1)
-    kwargs = {key: read_value(value) for key, value in (item.split("=", 1) for item in args.set)}
+    kwargs = dict(args.set)
     budgets = sorted(args.steps)
     rows = [
         row
@@ -89,8 +144,8 @@ def main() -> None:
         print(f"{budget:,} steps: median over {len(at)} seeds {median[budget]:.1f}")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
-    info = {"system": system_info(), "date": time.strftime("%Y-%m-%d %H:%M %Z"), "commit": commit}
+    # the sb3_es source that ran, wherever the script is run from (None outside a git checkout)
+    info = {"system": system_info(), "date": time.strftime("%Y-%m-%d %H:%M %Z"), "commit": source_commit()}
     record: dict[str, Any] = {"args": vars(args), "kwargs": kwargs, "runs": rows, "median": median, **info}
     (out / "headline.json").write_text(json.dumps(record, indent=2, default=str))
 

@@ -17,36 +17,59 @@ from __future__ import annotations
 
 import argparse
 import time
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
 import shimmy
-from common import system_info
+from common import algorithm_classes, system_info
 from stable_baselines3.common.env_util import make_vec_env
 
-import sb3_es
+from sb3_es.common.population_algorithm import PopulationAlgorithm
 from sb3_es.evaluation import VecEnvEvaluator
 
 gym.register_envs(shimmy)  # the dm_control/ ids
 
+#: ``--algo`` choices: sb3-es's population algorithms by class name (REINFORCE has no population).
+ALGORITHMS: dict[str, type[PopulationAlgorithm]] = algorithm_classes(PopulationAlgorithm)
 
-def main() -> None:
+
+def main(argv: list[str] | None = None) -> None:
+    """
+    Print the variances of a pair's return difference from common and from separate starting states.
+
+    :param argv: Arguments (defaults to ``sys.argv[1:]``).
+    """
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("model", help="a saved model (zip) of a population algorithm")
-    parser.add_argument("--algo", default="PGPE", help="its class in sb3_es (default PGPE)")
+    parser.add_argument("--algo", choices=sorted(ALGORITHMS), default="PGPE", help="its class in sb3_es (default PGPE)")
     parser.add_argument("env", help="env id")
     parser.add_argument("--pairs", type=int, default=16, help="mirrored pairs (default 16)")
     parser.add_argument("--episodes", type=int, default=10, help="episodes per candidate (default 10)")
     parser.add_argument("--sigma", type=float, default=None, help="perturbation scale (default: a PGPE model's stdevs)")
     parser.add_argument("--n-envs", type=int, default=8, help="env slots (default 8)")
     parser.add_argument("--seed", type=int, default=0)
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
+    problems = [
+        f"{flag} {value}: it must be at least 1"
+        for flag, value in (("--pairs", args.pairs), ("--n-envs", args.n_envs))
+        if value < 1
+    ]
+    if args.sigma is not None and not args.sigma > 0:
+        problems.append(f"--sigma {args.sigma:g}: it must be positive")
+    if args.episodes < 2:
+        problems.append(f"--episodes {args.episodes}: it must be at least 2 (the variance over episodes needs two)")
+    if args.sigma is None and args.algo != "PGPE":
+        problems.append(
+            f"--sigma is needed for a {args.algo} model (only PGPE keeps a standard deviation per parameter)"
+        )
+    if problems:
+        parser.error("; ".join(problems) + ".")
 
-    model = getattr(sb3_es, args.algo).load(args.model, device="cpu")
-    center = np.asarray(model.strategy.center)
-    if args.sigma is None and not isinstance(model, sb3_es.PGPE):
-        parser.error(f"--sigma is needed for a {args.algo} model (only PGPE keeps a standard deviation per parameter)")
-    sigma = np.asarray(model.strategy.stdev) if args.sigma is None else args.sigma
+    model = ALGORITHMS[args.algo].load(args.model, device="cpu")
+    strategy: Any = model.strategy  # a PGPE model's keeps the standard deviations
+    center = np.asarray(strategy.center)
+    sigma = np.asarray(strategy.stdev) if args.sigma is None else args.sigma
     rng = np.random.default_rng(args.seed)
     directions = sigma * rng.standard_normal((args.pairs, center.size))
     population = np.concatenate([center + directions, center - directions])

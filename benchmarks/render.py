@@ -246,6 +246,9 @@ def main(argv: list[str] | None = None) -> Path:
     for flag in ("steps", "episodes", "fps", "every"):
         if getattr(args, flag) < 1:
             parser.error(f"--{flag} {getattr(args, flag)}: it must be at least 1.")
+    out = args.out or args.model.with_suffix(".gif")
+    if out.suffix.lower() not in (".gif", ".mp4"):  # checked before the frames are rendered
+        parser.error(f"--out {out}: unsupported output; give a .gif or .mp4 file.")
     if not args.model.is_file():
         raise SystemExit(f"No model file {args.model}.")
     register_envs()
@@ -285,7 +288,6 @@ def main(argv: list[str] | None = None) -> Path:
                 frames.append(frame())
     finally:
         env.close()
-    out = args.out or args.model.with_suffix(".gif")
     written = write_video(frames, out, args.fps)
     finished = f"episode returns {[round(r, 1) for r in returns]}" if returns else "no episode finished"
     print(f"Wrote {written} ({len(frames)} frames, {type(model).__name__} on {env_id}; {finished}).")

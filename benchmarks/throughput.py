@@ -445,11 +445,18 @@ def processes_only(run: Callable[..., Result]) -> tuple[list[str], list[str]]:
     return lines, checks
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
+    """
+    Measure, then print the table and the checks.
+
+    :param argv: Arguments (defaults to ``sys.argv[1:]``).
+    """
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0] if __doc__ else None)
-    parser.add_argument("--seconds", type=float, default=8.0, help="timed window of each measurement")
-    parser.add_argument("--warmup", type=float, default=1.5, help="warm-up learn() / loop before timing")
-    parser.add_argument("--quick", action="store_true", help="2 s windows, 0.5 s warm-up (smoke test)")
+    parser.add_argument("--seconds", type=float, default=None, help="timed window of each measurement (default 8)")
+    parser.add_argument("--warmup", type=float, default=None, help="warm-up learn() / loop before timing (default 1.5)")
+    parser.add_argument(
+        "--quick", action="store_true", help="2 s windows, 0.5 s warm-up (smoke test; not with --seconds, --warmup)"
+    )
     parser.add_argument(
         "--only",
         choices=["bipedal", "pendulum", "processes"],
@@ -459,11 +466,21 @@ def main() -> None:
     parser.add_argument(
         "--torch-threads", type=int, default=0, help="th.set_num_threads() in the main process (0: torch's default)"
     )
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
+    problems = []
+    if args.seconds is not None and not args.seconds > 0:  # nan too
+        problems.append(f"--seconds {args.seconds:g}: it must be positive")
+    if args.warmup is not None and not args.warmup >= 0:
+        problems.append(f"--warmup {args.warmup:g}: it must be 0 or more")
+    if args.quick and (args.seconds is not None or args.warmup is not None):
+        problems.append("--quick sets 2 s windows and 0.5 s warm-ups: give it or --seconds/--warmup, not both")
+    if problems:
+        parser.error("; ".join(problems) + ".")
     if args.torch_threads > 0:
         th.set_num_threads(args.torch_threads)
     load_start = os.getloadavg()[0]
-    seconds, warmup = (2.0, 0.5) if args.quick else (args.seconds, args.warmup)
+    seconds = 2.0 if args.quick else 8.0 if args.seconds is None else args.seconds
+    warmup = 0.5 if args.quick else 1.5 if args.warmup is None else args.warmup
 
     def run(fn: Callable[..., Result], *fn_args: Any) -> Result:
         result = fn(*fn_args, seconds, warmup)

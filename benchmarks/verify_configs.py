@@ -15,12 +15,15 @@ Examples::
 Thresholds: ``--threshold ENV=X`` if given, else :data:`THRESHOLDS` (stated here where Gymnasium has none),
 else the env's ``spec.reward_threshold``. Evaluations: every :func:`eval_freq_for` env steps, or ``--eval-freq N``
 (stated in the YAML comment's command when it differs). Each run's outputs are compare.py's, under
-``<out>/<algo>/<env>/`` (``results.md``, ``logs/<algo>/<env>_1_seed<s>/summary.json`` and ``evaluations.npz``).
+``<out>/<algo>/<env>/`` (``results.md``, ``logs/<algo>/<env>_1_seed<s>/summary.json`` and ``evaluations.npz``, or
+``error.txt`` for a seed that failed), and its output is also appended to ``<out>/<algo>/<env>/compare.log``. A
+failed compare.py run or seed is named in the table, and the script then exits with status 1.
 """
 
 from __future__ import annotations
 
 import argparse
+import codecs
 import json
 import os
 import shlex
@@ -34,7 +37,7 @@ import gymnasium as gym
 import numpy as np
 import shimmy
 import yaml
-from common import PAPER_THRESHOLDS, selection_problems, step_count
+from common import PAPER_THRESHOLDS, read_value, selection_problems, step_count
 
 import sb3_es
 from sb3_es.zoo import default_conf_file, sb3_es_algos
@@ -109,13 +112,12 @@ def entry_folder(args: argparse.Namespace, algo: str, env_id: str) -> Path:
     return Path(args.out) / algo / (slug(env_id) + (f"-{args.tag}" if args.tag else ""))
 
 
-def run_entry(
-    algo: str, env_id: str, entry: dict[str, Any], args: argparse.Namespace, threshold: float | None
-) -> list[str]:
+def run_entry(algo: str, env_id: str, entry: dict[str, Any], args: argparse.Namespace, threshold: float | None) -> int:
     """
-    Run compare.py for one entry (skipping seeds already done).
+    Run compare.py for one entry (skipping seeds already done), its output shown and appended to the entry's
+    ``compare.log``.
 
-    :return: The compare.py command.
+    :return: compare.py's exit status.
     """
     steps = int(float(entry["n_timesteps"]))
     if args.max_steps is not None:
@@ -151,24 +153,66 @@ def run_entry(
     # working directory, is first on a script's sys.path)
     root = str(Path(sb3_es.__file__).resolve().parents[1])
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [root, os.environ.get("PYTHONPATH")])))
-    subprocess.run(command, check=False, env=env)
-    return command
+    env["PYTHONUNBUFFERED"] = "1"  # its output as it comes, through the pipe
+    return run_logged(command, env, compare_log(args, algo, env_id))
 
 
-def seed_results(folder: Path, threshold: float | None) -> list[dict[str, Any]]:
+def compare_log(args: argparse.Namespace, algo: str, env_id: str) -> Path:
+    """:return: The file the entry's compare.py output is appended to."""
+    return entry_folder(args, algo, env_id) / "compare.log"
+
+
+def run_logged(command: list[str], env: dict[str, str], log: Path) -> int:
+    """
+    Run a command, its output (stdout and stderr) printed as it comes and appended to ``log``.
+
+    :param command: The command.
+    :param env: Its environment.
+    :param log: The file to append its output to (after a ``$ command`` line).
+    :return: Its exit status.
+    """
+    log.parent.mkdir(parents=True, exist_ok=True)
+    decoder = codecs.getincrementaldecoder("utf-8")(errors="replace")
+    with log.open("ab") as file:
+        file.write(f"$ {shlex.join(command)}\n".encode())
+        with subprocess.Popen(command, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT) as proc:
+            assert proc.stdout is not None
+            while chunk := os.read(proc.stdout.fileno(), 1 << 16):
+                file.write(chunk)
+                file.flush()
+                sys.stdout.write(decoder.decode(chunk))
+                sys.stdout.flush()
+    return proc.returncode
+
+
+def seed_results(folder: Path, threshold: float | None, seeds: list[int]) -> list[dict[str, Any]]:
     """
     :param folder: compare.py output folder of one entry.
     :param threshold: Return threshold.
-    :return: Per seed: steps, wall-clock, final and best return, and where the threshold was first reached.
+    :param seeds: The seeds to report (others in the folder are left out).
+    :return: Per seed, by seed number, its ``status``: ``"done"`` with steps, wall-clock, final and best return and
+        where the threshold was first reached; ``"failed"`` with the ``error`` file compare.py's ``--keep-going``
+        wrote; or ``"not run"``.
     """
-    results = []
-    for summary_path in sorted(folder.glob("logs/*/*_seed*/summary.json")):
+    results: list[dict[str, Any]] = []
+    for seed in sorted(seeds):  # by number: the folder names put seed 10 before seed 2
+        runs = sorted(folder.glob(f"logs/*/*_seed{seed}"))
+        summary_path = next((run / "summary.json" for run in runs if (run / "summary.json").is_file()), None)
+        if summary_path is None:  # a seed's error.txt counts only without a result (a later run may have one)
+            error = next((run / "error.txt" for run in runs if (run / "error.txt").is_file()), None)
+            results.append(
+                {"seed": seed, "status": "not run"}
+                if error is None
+                else {"seed": seed, "status": "failed", "error": error}
+            )
+            continue
         summary = json.loads(summary_path.read_text())
         evaluations = np.load(summary_path.parent / "evaluations.npz")
         means = [float(np.mean(r)) for r in evaluations["results"]]
         hit = next((i for i, m in enumerate(means) if threshold is not None and m >= threshold), None)
         results.append(
             {
+                "status": "done",
                 "seed": summary["seed"],
                 "steps": summary["env_steps"],
                 "seconds": summary["train_seconds"],
@@ -188,7 +232,12 @@ def seed_results(folder: Path, threshold: float | None) -> list[dict[str, Any]]:
                 "hardware": summary["hardware"],
             }
         )
-    return sorted(results, key=lambda r: r["seed"])  # by number: the folder names put seed 10 before seed 2
+    return results
+
+
+def done(results: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """:return: The seed results that have figures (status ``"done"``, :func:`seed_results`)."""
+    return [r for r in results if r["status"] == "done"]
 
 
 #: The settings of a run that its figures depend on: seeds run with different ones are reported apart.
@@ -212,10 +261,25 @@ def budget_text(r: dict[str, Any]) -> str:
     return budget + (f" or {r['budget_seconds']:g} s" if r["budget_seconds"] else "")
 
 
-def table(rows: list[tuple[str, str, float | None, list[dict[str, Any]]]]) -> str:
+def outcome_text(r: dict[str, Any]) -> str:
+    """:return: One seed's cell of the table's outcome column (:func:`seed_results`)."""
+    if r["status"] == "failed":
+        return f"s{r['seed']}: failed, see {r['error']}"
+    if r["status"] == "not run":
+        return f"s{r['seed']}: not run"
+    if r["hit_steps"] is not None:
+        return f"s{r['seed']}: {r['hit_steps']:,}"
+    return f"s{r['seed']}: {r['final']:.1f} / {r['best']:.1f} ({r['steps']:,} steps)"
+
+
+def table(
+    rows: list[tuple[str, str, float | None, list[dict[str, Any]]]], failures: dict[tuple[str, str], str] | None = None
+) -> str:
     """
     :param rows: ``(algo, env_id, threshold, seed results)`` per entry.
-    :return: The markdown table, one row per entry.
+    :param failures: What to say of the entries whose compare.py run failed, by ``(algo, env_id)``.
+    :return: The markdown table, one row per entry; a seed that failed or was not run counts as not reaching the
+        threshold.
     """
     lines = [
         "| algorithm | env | threshold | seeds | budget | start return | steps to threshold, or final / best return "
@@ -224,29 +288,28 @@ def table(rows: list[tuple[str, str, float | None, list[dict[str, Any]]]]) -> st
     ]
     for algo, env_id, threshold, results in rows:
         shown = "none" if threshold is None else f"{threshold:g}"
-        if not results:
-            lines.append(f"| {algo} | {env_id} | {shown} | | | | not run | | |")
+        failure = (failures or {}).get((algo, env_id))
+        if all(r["status"] == "not run" for r in results):
+            lines.append(f"| {algo} | {env_id} | {shown} | | | | {failure or 'not run'} | | |")
             continue
-        groups = settings_groups(results)
+        groups = settings_groups(done(results))
         budget = (
-            budget_text(results[0])
+            budget_text(groups[0][0])
             if len(groups) == 1
             else "; ".join(f"{budget_text(g[0])} ({', '.join('s' + str(r['seed']) for r in g)})" for g in groups)
         )
-        outcome = []
-        for r in results:
-            if r["hit_steps"] is not None:
-                outcome.append(f"s{r['seed']}: {r['hit_steps']:,}")
-            else:
-                outcome.append(f"s{r['seed']}: {r['final']:.1f} / {r['best']:.1f} ({r['steps']:,} steps)")
+        outcome = "; ".join([*map(outcome_text, results), *([failure] if failure else [])])
         seconds = ", ".join(
-            f"{r['hit_seconds'] if r['hit_seconds'] is not None else r['seconds']:,.0f}" for r in results
+            "-"
+            if r["status"] != "done"
+            else f"{r['hit_seconds'] if r['hit_seconds'] is not None else r['seconds']:,.0f}"
+            for r in results
         )
-        reached = sum(r["hit_steps"] is not None for r in results)
+        reached = sum(r["status"] == "done" and r["hit_steps"] is not None for r in results)
         seeds = ", ".join(str(r["seed"]) for r in results)
-        start = ", ".join(f"{r['first']:.1f}" for r in results)
+        start = ", ".join(f"{r['first']:.1f}" if r["status"] == "done" else "-" for r in results)
         lines.append(
-            f"| {algo} | {env_id} | {shown} | {seeds} | {budget} | {start} | {'; '.join(outcome)} | {seconds} "
+            f"| {algo} | {env_id} | {shown} | {seeds} | {budget} | {start} | {outcome} | {seconds} "
             f"| {reached}/{len(results)} |"
         )
     return "\n".join(lines)
@@ -255,13 +318,18 @@ def table(rows: list[tuple[str, str, float | None, list[dict[str, Any]]]]) -> st
 def comment(algo: str, env_id: str, threshold: float | None, results: list[dict[str, Any]], n_timesteps: int) -> str:
     """
     The YAML comment lines that state an entry's measured result and the command that reproduces it: one statement
-    and command per group of seeds run with the same settings (:func:`settings_groups`).
+    and command per group of seeds run with the same settings (:func:`settings_groups`), then a line naming the seeds
+    that failed or were not run.
 
     :param results: The entry's seed results (:func:`seed_results`).
     :param n_timesteps: The entry's ``n_timesteps``.
     :return: ``# ``-prefixed lines.
     """
-    return "\n".join(group_comment(algo, env_id, threshold, group, n_timesteps) for group in settings_groups(results))
+    lines = [group_comment(algo, env_id, threshold, group, n_timesteps) for group in settings_groups(done(results))]
+    others = [f"seed {r['seed']} {r['status']}" for r in results if r["status"] != "done"]
+    if others:
+        lines.append(f"# Not counted above: {', '.join(others)}.")
+    return "\n".join(lines)
 
 
 def group_comment(
@@ -312,7 +380,7 @@ def group_comment(
 
 def main(argv: list[str] | None = None) -> str:
     """
-    Run the selected entries and print the table.
+    Run the selected entries and print the table; exit with status 1 after it if a compare.py run or a seed failed.
 
     :param argv: Arguments (defaults to ``sys.argv[1:]``).
     :return: The table.
@@ -326,7 +394,7 @@ def main(argv: list[str] | None = None) -> str:
     parser.add_argument("--eval-episodes", type=int, default=DEFAULT_EVAL_EPISODES)
     parser.add_argument("--eval-envs", type=int, default=1, help="envs the evaluation episodes run on side by side")
     parser.add_argument(
-        "--eval-freq", type=int, default=None, help="env steps between evaluations (default: chosen per env)"
+        "--eval-freq", type=step_count, default=None, help="env steps between evaluations (default: chosen per env)"
     )
     parser.add_argument(
         "--threshold", nargs="+", action="extend", default=[], help="ENV_ID=RETURN, replacing the defaults (repeatable)"
@@ -340,14 +408,19 @@ def main(argv: list[str] | None = None) -> str:
     args = parser.parse_args(argv)
     given = {}
     for item in args.threshold:
-        env_id, sep, value = item.rpartition("=")
-        if not sep:
-            raise SystemExit(f"--threshold {item!r}: use ENV_ID=VALUE, e.g. Pendulum-v1=-200")
+        env_id, sep, text = item.rpartition("=")
+        value = read_value(text) if sep else None
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise SystemExit(f"--threshold {item!r}: use ENV_ID=VALUE with a number, e.g. Pendulum-v1=-200")
         given[env_id] = float(value)
     problems = [
         f"{flag} {value}: it must be positive"
-        for flag, value in (("--max-steps", args.max_steps), ("--max-seconds", args.max_seconds))
-        if value is not None and value <= 0
+        for flag, value in (
+            ("--max-steps", args.max_steps),
+            ("--max-seconds", args.max_seconds),
+            ("--eval-freq", args.eval_freq),
+        )
+        if value is not None and not value > 0
     ]
     unknown_algos = sorted(set(args.algos) - set(sb3_es_algos()))
     if unknown_algos:
@@ -360,18 +433,31 @@ def main(argv: list[str] | None = None) -> str:
     if without:
         raise SystemExit(f"No entry for {without} in the packaged files of {args.algos}: check the env ids.")
     rows, comments = [], []
+    failures: dict[tuple[str, str], str] = {}  # the compare.py runs that failed
     for algo, env_id, entry in selected:
         threshold = threshold_for(env_id, given)
         if not args.table_only:
-            run_entry(algo, env_id, entry, args, threshold)
-        results = seed_results(entry_folder(args, algo, env_id), threshold)
+            status = run_entry(algo, env_id, entry, args, threshold)
+            if status != 0:
+                log = compare_log(args, algo, env_id)
+                failures[(algo, env_id)] = f"compare.py failed (exit status {status}), see {log}"
+        results = seed_results(entry_folder(args, algo, env_id), threshold, args.seeds)
         rows.append((algo, env_id, threshold, results))
-        if args.comments and results:
+        if args.comments and done(results):
             comments.append(
                 f"{algo} {env_id}:\n" + comment(algo, env_id, threshold, results, int(float(entry["n_timesteps"])))
             )
-    text = "\n\n".join([table(rows), *comments])
+    text = "\n\n".join([table(rows, failures), *comments])
     print(text)
+    failed = [f"{algo} {env_id}: {message}" for (algo, env_id), message in failures.items()]
+    failed += [
+        f"{a} {e} seed {r['seed']} failed, see {r['error']}"
+        for a, e, _, rs in rows
+        for r in rs
+        if r["status"] == "failed"
+    ]
+    if failed:
+        raise SystemExit("verify_configs.py: " + "; ".join(failed) + ".")
     return text
 
 

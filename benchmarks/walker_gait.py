@@ -20,25 +20,45 @@ import argparse
 import gymnasium as gym
 import numpy as np
 import shimmy
+from common import algorithm_classes
 from stable_baselines3.common.base_class import BaseAlgorithm
 from walker_shaping import STAND_HEIGHT, UprightStart, walker_physics
 
-import sb3_es
+from sb3_es.zoo.registry import ALGOS
 
 gym.register_envs(shimmy)  # the dm_control/ ids
 
+#: ``--algo`` choices: sb3-es's algorithm classes by class name (``PGPE``) and by rl-zoo key (``pgpe``, ``ars_es``).
+ALGORITHMS: dict[str, type[BaseAlgorithm]] = {
+    **algorithm_classes(BaseAlgorithm),
+    **ALGOS,
+}
 
-def main() -> None:
+
+def main(argv: list[str] | None = None) -> None:
+    """
+    Print the figures of each episode, then by phase.
+
+    :param argv: Arguments (defaults to ``sys.argv[1:]``).
+    """
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("model", help="a saved sb3-es model (zip) trained on dm_control/walker-walk-v0")
-    parser.add_argument("--algo", default="PGPE", help="its algorithm class in sb3_es (default PGPE)")
+    parser.add_argument(
+        "--algo",
+        choices=list(ALGORITHMS),
+        default="PGPE",
+        metavar="ALGO",
+        help=f"its sb3-es algorithm, a class name or an rl-zoo key: {', '.join(ALGORITHMS)} (default PGPE)",
+    )
     parser.add_argument("--episodes", type=int, default=5)
     parser.add_argument(
         "--upright-starts", action="store_true", help="start every episode upright (walker_shaping.UprightStart)"
     )
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
+    if args.episodes < 1:
+        parser.error(f"--episodes {args.episodes}: it must be at least 1")
 
-    model: BaseAlgorithm = getattr(sb3_es, args.algo).load(args.model, device="cpu")
+    model: BaseAlgorithm = ALGORITHMS[args.algo].load(args.model, device="cpu")
     env = gym.make("dm_control/walker-walk-v0")
     if args.upright_starts:
         env = UprightStart(env, probability=1.0)

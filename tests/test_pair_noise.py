@@ -7,6 +7,9 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+from test_zoo import load_script
+
 from sb3_es import PGPE
 
 SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "pair_noise.py"
@@ -23,3 +26,10 @@ def test_common_starting_states_remove_the_noise_of_near_identical_pairs(tmp_pat
     assert set(variances) == {"common", "separate"}, out
     assert float(variances["common"]) < 1 < float(variances["separate"]), out
     assert re.search(r"ratio separate / common: [\d.]+", out), out
+
+
+def test_fewer_than_two_episodes_are_refused(capsys: pytest.CaptureFixture[str]) -> None:
+    """A variance over one episode is nan: refused before the model is loaded."""
+    with pytest.raises(SystemExit):
+        load_script("pair_noise").main(["model.zip", "Pendulum-v1", "--episodes", "1"])
+    assert "--episodes 1: it must be at least 2 (the variance over episodes needs two)" in capsys.readouterr().err

@@ -2,14 +2,20 @@
 
 from __future__ import annotations
 
+import json
+import re
+from pathlib import Path
 from typing import Any
 
+import numpy as np
+import pytest
 from test_zoo import load_script
 
 
 def result(seed: int, hit: int | None, commit: str | None = "abc1234") -> dict[str, Any]:
     """One seed's result as ``seed_results`` gives it."""
     return {
+        "status": "done",
         "seed": seed,
         "steps": 1_200_000,
         "seconds": 150.0,
@@ -91,3 +97,95 @@ def test_seeds_run_with_other_settings_are_reported_apart() -> None:
     assert "or 900 s of training" in joined and "(1,200,000 steps, 734 s)" in joined
     row = script.table([("ars_es", "Hopper-v5", 300.0, [result(0, 800_000), *longer])]).splitlines()[-1]
     assert "| 2,000,000 steps or 150 s (s0); 2,000,000 steps or 900 s (s1, s2) |" in row
+
+
+def fake_run(folder: Path, seed: int, means: list[float] | None, error: bool = False) -> Path:
+    """
+    A compare.py run folder of ars_es on CartPole-v1 under ``folder``: a finished run (``summary.json`` and
+    ``evaluations.npz``, one evaluation per mean, every 1,000 steps) unless ``means`` is None, an ``error.txt`` if
+    ``error``.
+    """
+    run = folder / "logs" / "ars_es" / f"CartPole-v1_1_seed{seed}"
+    run.mkdir(parents=True)
+    if error:
+        (run / "error.txt").write_text("Traceback ...\nRuntimeError: boom\n")
+    if means is not None:
+        steps = [1000 * (i + 1) for i in range(len(means))]
+        np.savez(run / "evaluations.npz", results=np.array(means)[:, None], timesteps=np.array(steps))
+        fields = {"budget_steps": 5000, "budget_seconds": None, "eval_freq": 1000, "eval_episodes": 10}
+        summary = {"seed": seed, "env_steps": steps[-1], "train_seconds": 9.0, "eval_train_seconds": [3.0] * len(means)}
+        summary |= {
+            "command": "c",
+            "date": "2026-12-01 10:00 UTC",
+            "commit": "abc1234",
+            "eval_envs": 1,
+            "hardware": "h",
+        }
+        (run / "summary.json").write_text(json.dumps({**summary, **fields}))
+    return run
+
+
+def test_failed_and_missing_seeds_are_counted_and_only_the_requested_ones_reported(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A seed that failed under compare.py's --keep-going (its error.txt, no result) counts as failed, a requested seed
+    without a run as not run, and a seed that was not requested is left out; a failed seed fails the script."""
+    folder = tmp_path / "ars_es" / "CartPole-v1"
+    fake_run(folder, 0, [20.0, 480.0], error=True)  # an error.txt from an earlier try does not hide a result
+    failed = fake_run(folder, 1, None, error=True)
+    fake_run(folder, 3, [500.0])  # not in --seeds
+    argv = ["--table-only", "--comments", "--algos", "ars_es", "--envs", "CartPole-v1", "--seeds", "2", "1", "0"]
+    with pytest.raises(
+        SystemExit, match=f"ars_es CartPole-v1 seed 1 failed, see {re.escape(str(failed / 'error.txt'))}.$"
+    ):
+        load_script("verify_configs").main([*argv, "--out", str(tmp_path)])
+    out = capsys.readouterr().out
+    row = next(line for line in out.splitlines() if line.startswith("| ars_es | CartPole-v1"))
+    assert row.startswith("| ars_es | CartPole-v1 | 475 | 0, 1, 2 | 5,000 steps | 20.0, -, - |")
+    assert f"| s0: 2,000; s1: failed, see {failed / 'error.txt'}; s2: not run | 3, -, - | 1/3 |" in row
+    assert "# Not counted above: seed 1 failed, seed 2 not run." in out
+    assert "475 reached by 1 of 1" in out and "seed 3" not in out and "s3" not in out
+
+
+def test_a_failed_compare_run_is_named_in_the_table_and_fails_the_script(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """compare.py refuses --eval-episodes 0: the row says so and where its output is, and the script exits 1."""
+    argv = [
+        "--algos",
+        "ars_es",
+        "--envs",
+        "CartPole-v1",
+        "--seeds",
+        "0",
+        "--eval-episodes",
+        "0",
+        "--out",
+        str(tmp_path),
+    ]
+    log = tmp_path / "ars_es" / "CartPole-v1" / "compare.log"
+    message = f"compare.py failed (exit status 1), see {log}"
+    with pytest.raises(SystemExit, match=f"^verify_configs.py: ars_es CartPole-v1: {re.escape(message)}.$"):
+        load_script("verify_configs").main(argv)
+    out = capsys.readouterr().out
+    assert f"| ars_es | CartPole-v1 | 475 | | | | {message} | | |" in out
+    assert "--eval-episodes 0: it must be positive" in out  # compare.py's output, shown as it came
+    assert log.read_text().startswith("$ ") and "--eval-episodes 0: it must be positive" in log.read_text()
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        (["--threshold", "CartPole-v1=abc"], r"--threshold 'CartPole-v1=abc': use ENV_ID=VALUE with a number"),
+        (["--eval-freq", "0"], r"--eval-freq 0: it must be positive"),
+    ],
+)
+def test_bad_thresholds_and_eval_frequencies_are_refused(extra: list[str], message: str, tmp_path: Path) -> None:
+    with pytest.raises(SystemExit, match=message):
+        load_script("verify_configs").main(["--table-only", "--envs", "CartPole-v1", "--out", str(tmp_path), *extra])
+
+
+def test_eval_freq_reads_exponent_form(tmp_path: Path) -> None:
+    """--eval-freq takes step counts as --max-steps and compare.py do (2e4)."""
+    argv = ["--table-only", "--algos", "ars_es", "--envs", "CartPole-v1", "--eval-freq", "2e4", "--out", str(tmp_path)]
+    assert "| ars_es | CartPole-v1 | 475 | | | | not run | | |" in load_script("verify_configs").main(argv)
