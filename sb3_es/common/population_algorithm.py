@@ -84,7 +84,8 @@ class PopulationAlgorithm(StrategyAlgorithm):
     :param noise_table_size: (ARS, OpenES and SimpleES, whose strategies draw Gaussian directions; not a parameter of
         this base class) Read the perturbations from a shared noise table of this many float32 values (e.g.
         ``2**24``) instead of drawing them fresh, so that a Ray evaluator sends an offset per candidate rather than a
-        parameter vector. ``None`` (default) draws them fresh.
+        parameter vector; offsets are drawn independently (OpenAI's ES), so keep the table far larger than a
+        generation's perturbations. ``None`` (default) draws them fresh.
     :param _init_setup_model: Whether to build the model at construction.
     """
 

@@ -58,7 +58,7 @@ class SharedNoiseTable:
                 f"noise_table_size={self.size} is smaller than one perturbation ({dim} parameters): raise it well "
                 f"above {dim} (tables of millions of values are usual), or pass None to draw every perturbation afresh."
             )
-        if self.size - dim + 1 < n:  # fewer slices than perturbations: some candidates would share a direction
+        if self.size - dim + 1 < n:  # fewer slices than perturbations: some candidates would surely share one
             raise ValueError(
                 f"The noise table ({self.size} values) holds {self.size - dim + 1} distinct perturbations of {dim} "
                 f"parameters, fewer than the {n} of a generation: raise noise_table_size well above {dim + n - 1} "
@@ -70,7 +70,9 @@ class SharedNoiseTable:
         :param rng: Random generator (the strategy's, so runs stay reproducible).
         :param dim: Length of each slice (the number of parameters).
         :param n: Number of offsets.
-        :return: ``n`` offsets such that every slice fits in the table.
+        :return: ``n`` offsets such that every slice fits in the table, drawn independently, as in OpenAI's ES: in a
+            table not much larger than ``dim + n`` two candidates may share a direction (the check only makes sure
+            there are ``n`` distinct slices to draw from).
         """
         self.check_fits(dim, n)
         return rng.integers(0, self.size - dim + 1, size=n)
