@@ -229,6 +229,19 @@ def test_normalize_observations_false_ignores_stats() -> None:
     )
 
 
+@pytest.mark.parametrize(
+    "space", [spaces.Discrete(3, start=1), spaces.MultiDiscrete([3, 2], start=[1, -1])], ids=["Discrete", "Multi"]
+)
+def test_discrete_observations_with_a_start_are_one_hot_from_their_start(space: spaces.Space) -> None:
+    # SB3's preprocess_obs counts from 0: its one-hot of Discrete(3, start=1)'s largest value, 3, fails
+    policy = LinearPolicy(space, ACT_DISCRETE, normalize_observations=False)
+    space.seed(0)
+    samples = np.stack([space.sample() for _ in range(20)])
+    expected = np.stack([spaces.flatten(space, sample) for sample in samples])  # gymnasium's one-hot, from start
+    np.testing.assert_array_equal(policy.flatten_obs(samples), expected)
+    assert policy.predict(samples[0])[0] in range(4)
+
+
 # ---------------------------------------------------------------------------- Dict observations
 DICT_SPACE = spaces.Dict(
     {

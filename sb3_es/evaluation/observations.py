@@ -43,6 +43,8 @@ def _flatten_entry(obs: np.ndarray, space: spaces.Space) -> np.ndarray:
     :return: ``(n, flat_dim)`` observations.
     """
     obs = np.asarray(obs)
+    if isinstance(space, spaces.Discrete | spaces.MultiDiscrete) and np.any(space.start):
+        obs = obs - space.start  # SB3's one-hot counts from 0 (Discrete(3, start=1) holds 1, 2, 3)
     if not isinstance(space, spaces.Box):
         obs = preprocess_obs(th.as_tensor(obs), space, normalize_images=False).numpy()  # type: ignore[union-attr]
     return obs.reshape(obs.shape[0], -1)
