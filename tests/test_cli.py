@@ -103,7 +103,23 @@ def test_abbreviated_and_attached_options_are_read_as_rl_zoo_reads_them() -> Non
 def test_trial_id_0_is_refused_and_a_trial_id_is_said(capsys: pytest.CaptureFixture[str]) -> None:
     from sb3_es.zoo.commands import prepare_args
 
-    with pytest.raises(UsageError, match="--trial-id 0: rl-zoo reads a trial id of 0 as no trial"):
-        prepare_args("train", ["--algo", "openes", "--env", "CartPole-v1", "--trial-id", "0"])
-    prepare_args("train", ["--algo", "openes", "--env", "CartPole-v1", "--trial-id=3"])
+    study = ["--storage", "sqlite:///s.db", "--study-name", "s"]
+    for zero in ("0", "00"):  # argparse reads both as 0
+        with pytest.raises(UsageError, match=rf"--trial-id {zero}: rl-zoo reads a trial id of 0 as no trial") as info:
+            prepare_args("train", ["--algo", "openes", "--env", "CartPole-v1", *study, "--trial-id", zero])
+        # the keyword arguments, not the study's stored names (population_size_pow, ...), which -params refuses
+        assert "CONVERTERS['openes'](optuna.load_study(study_name='s', storage='sqlite:///s.db')" in str(info.value)
+    with pytest.raises(UsageError, match=r"--trial-id 3 needs --storage and --study-name: without both, rl-zoo"):
+        prepare_args("train", ["--algo", "openes", "--env", "CartPole-v1", "--trial-id", "3", *study[:2]])
+    prepare_args("train", ["--algo", "openes", "--env", "CartPole-v1", *study, "--trial-id=3"])
     assert "the values of trial 3 of the study replace the file's" in capsys.readouterr().out
+
+
+def test_a_pgpe_search_with_another_optimizer_than_clipup_is_refused() -> None:
+    # the sampler draws ClipUp's max_speed, which PGPE refuses with Adam: every trial would fail
+    from sb3_es.zoo.commands import prepare_args
+
+    search = ["--algo", "pgpe", "--env", "CartPole-v1", "-optimize", "-params", "optimizer:'adam'"]
+    with pytest.raises(UsageError, match=r"-optimize samples PGPE's ClipUp max_speed, which optimizer='adam' does"):
+        prepare_args("train", [*search, "center_learning_rate:0.01"])
+    prepare_args("train", search[:-3])  # the entry's ClipUp

@@ -229,11 +229,25 @@ def prepare_args(command: str, args: Sequence[str]) -> list[str]:
         return args
     if command == "train":
         trial_id = _option_value(args, ("--trial-id",), "")
-        if trial_id.strip() in ("0", "-0"):
+        storage = _option_value(args, ("--storage",), "")
+        study = _option_value(args, ("--study-name",), "")
+        # rl-zoo's CSV and "Best trial" print the study's stored names (population_size_pow, ...): the keyword
+        # arguments are the key's converter applied to them.
+        convert = (
+            'python -c "import optuna; from sb3_es.zoo.hyperparams_opt import CONVERTERS; '
+            f"print(CONVERTERS['{algo}'](optuna.load_study(study_name='{study or 'STUDY'}', "
+            f"storage='{storage or 'STORAGE'}').trials[0].params))\""
+        )
+        if trial_id and parse_number(trial_id) == 0:
             raise UsageError(
-                "--trial-id 0: rl-zoo reads a trial id of 0 as no trial and would train with the file's values. Pass "
-                "trial 0's values with -params key:value instead (they are in the study, or in the report_*.csv "
-                "that -optimize wrote)."
+                f"--trial-id {trial_id}: rl-zoo reads a trial id of 0 as no trial and would train with the file's "
+                "values. Pass trial 0's keyword arguments with -params key:value instead; they are printed by "
+                f"{convert} (an SQLite storage as sqlite:///file.db; rl-zoo opens a .log file as a JournalStorage)."
+            )
+        if trial_id and not (storage and study):
+            raise UsageError(
+                f"--trial-id {trial_id} needs --storage and --study-name: without both, rl-zoo loads no trial and "
+                "would train with the file's values."
             )
         if not _has_option(args, "-conf", "--conf-file"):
             args += ["--conf-file", str(default_conf_file(algo))]
@@ -251,6 +265,17 @@ def prepare_args(command: str, args: Sequence[str]) -> list[str]:
                 )
             overrides = _hyperparam_overrides(args)
             check_entry_names(conf, key, algo, [*entry, *overrides])
+            optimizer = str({**entry, **overrides}.get("optimizer", "clipup")).strip("'\"")
+            if (
+                algo == "pgpe"
+                and optimizer != "clipup"
+                and _has_option(args, "-optimize", "--optimize-hyperparameters")
+            ):
+                raise UsageError(
+                    f"-optimize samples PGPE's ClipUp max_speed, which optimizer={optimizer!r} does not take: every "
+                    "trial would be refused. Search with ClipUp (leave optimizer out of the entry and -params), then "
+                    "tune the other optimizer by hand."
+                )
             check_schedule_strings(conf, key, {k: v for k, v in entry.items() if k not in overrides})
             if key == "default":
                 used = {**entry, **overrides}
