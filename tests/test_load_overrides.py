@@ -306,3 +306,14 @@ def test_numpy_numbers_given_to_load_are_numbers(tmp_path: Path) -> None:
     model = ARS.load(path, env=make_vec_env("Pendulum-v1", n_envs=2, seed=1), learning_rate=np.float32(0.05))
     model.learn(1, reset_num_timesteps=False)
     assert type(model.learning_rate) is float and model.strategy.learning_rate == pytest.approx(0.05)
+
+
+def test_custom_objects_of_a_subclass_taking_kwargs_replace_as_in_sb3(tmp_path: Path) -> None:
+    # its signature names no hyperparameter, so nothing in custom_objects can be checked as one: SB3's replacement
+    class Wrapped(ARS):
+        def __init__(self, *args: Any, **kwargs: Any) -> None:
+            super().__init__(*args, **kwargs)
+
+    Wrapped("LinearPolicy", "Pendulum-v1", n_delta=2).save(tmp_path / "wrapped.zip")
+    model = Wrapped.load(tmp_path / "wrapped.zip", custom_objects={"learning_rate": 2e-5, "dummy": 1.0})
+    assert model.learning_rate == 2e-5

@@ -346,7 +346,9 @@ class ESBaseAlgorithm(BaseAlgorithm):
         custom_objects = dict(custom_objects or {})
         # As SB3's load() rebuilds learning_rate's schedule from a replaced learning_rate, a hyperparameter replaced
         # here drives training: handled as a change, not left on the model beside a strategy that uses the saved one.
-        replaced = {key: custom_objects.pop(key) for key in set(custom_objects) & cls._applicable_on_load()}
+        # (Names of this class's own signature: a subclass whose __init__ takes **kwargs keeps SB3's replacement.)
+        changeable = cls._applicable_on_load() & cls._parameters()
+        replaced = {key: custom_objects.pop(key) for key in set(custom_objects) & changeable}
         data, _ = check_save_file(path, cls, custom_objects)
         cls._check_save_data(path, data)
         signature = inspect.signature(cls.__init__).parameters
