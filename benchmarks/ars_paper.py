@@ -24,7 +24,7 @@ from typing import Any
 
 import gymnasium as gym
 import shimmy
-from common import PAPER_THRESHOLDS, hardware, step_count, versions
+from common import PAPER_THRESHOLDS, hardware, positive_problems, step_count, versions
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.evaluation import evaluate_policy
 
@@ -163,16 +163,14 @@ def main(argv: list[str] | None = None) -> None:
     )
     parser.add_argument("--policy", choices=sorted(POLICIES), default="linear")
     args = parser.parse_args(argv)
-    problems = [
-        f"{flag} {value:g}: it must be positive"
-        for flag, value in (
-            ("--steps", args.steps),
-            ("--max-seconds", args.max_seconds),
-            ("--eval-every", args.eval_every),
-            ("--n-envs", args.n_envs),
-        )
-        if not value > 0  # nan too
-    ]
+    problems = positive_problems(
+        {
+            "--steps": args.steps,
+            "--max-seconds": args.max_seconds,
+            "--eval-every": args.eval_every,
+            "--n-envs": args.n_envs,
+        }
+    )
     if problems:
         parser.error("; ".join(problems) + ".")
     print(f"hardware: {hardware()}; versions: {versions()}")

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import math
 import multiprocessing as mp
 import os
 import platform
@@ -25,6 +26,7 @@ import yaml
 from stable_baselines3.common.utils import get_system_info
 
 import sb3_es
+from sb3_es.strategies.base import parse_number
 
 #: Reward thresholds of the ARS paper (Mania et al. 2018, Table 1: the levels its MuJoCo tasks are counted as
 #: solved at), used for the ``-v5`` tasks, and the seed document's levels for dm_control walker-walk (a linear policy
@@ -87,6 +89,33 @@ def step_count(text: str) -> int:
     if not value.is_integer():
         raise argparse.ArgumentTypeError(f"{text!r} is not a whole number of steps; give one such as 2000000 or 2e6")
     return int(value)
+
+
+def parse_thresholds(items: list[str]) -> dict[str, float]:
+    """
+    Parse ``ENV=VALUE`` items.
+
+    :param items: Items from the command line.
+    :return: Threshold per env id.
+    """
+    thresholds = {}
+    for item in items:
+        env_id, sep, value = item.rpartition("=")
+        number = parse_number(value) if sep else None
+        if number is None or not math.isfinite(number):  # NaN or inf: never reached, or always
+            raise SystemExit(f"--threshold {item!r}: use ENV_ID=VALUE with a number, e.g. Pendulum-v1=-200")
+        thresholds[env_id] = number
+    return thresholds
+
+
+def positive_problems(flags: dict[str, float | None]) -> list[str]:
+    """
+    :param flags: Value of each flag (``None``: not given).
+    :return: ``FLAG VALUE: it must be positive`` for each value given that is not above 0 (NaN included).
+    """
+    return [
+        f"{flag} {value:g}: it must be positive" for flag, value in flags.items() if value is not None and not value > 0
+    ]
 
 
 def selection_problems(seeds: list[int], envs: list[str], thresholds: dict[str, float]) -> list[str]:

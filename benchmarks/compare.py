@@ -56,7 +56,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import inspect
 import io
 import json
 import math
@@ -75,13 +74,11 @@ import gymnasium as gym
 import numpy as np
 import torch
 import yaml
-from common import hardware, read_value, selection_problems, source_commit, step_count, versions
+from common import hardware, parse_thresholds, read_value, selection_problems, source_commit, step_count, versions
 from stable_baselines3.common.callbacks import EvalCallback
 from stable_baselines3.common.evaluation import evaluate_policy
 from stable_baselines3.common.utils import set_random_seed
 from stable_baselines3.common.vec_env import VecEnv
-
-from sb3_es.strategies.base import parse_number
 
 try:
     import rl_zoo3
@@ -89,7 +86,7 @@ try:
     from rl_zoo3.utils import get_wrapper_class
 
     from sb3_es.zoo import RENAMED, UsageError, check_algo, default_conf_file, register, sb3_es_algos
-    from sb3_es.zoo.commands import ZOO_KEYS
+    from sb3_es.zoo.commands import ZOO_KEYS, constructor_names
     from sb3_es.zoo.registry import zoo_meaning
 except ImportError as e:  # pragma: no cover
     raise SystemExit(f"benchmarks/compare.py needs rl_zoo3: pip install 'sb3-es[zoo]' ({e})") from e
@@ -899,23 +896,6 @@ def parse_overrides(items: list[str]) -> dict[str, dict[str, Any]]:
     return dict(overrides)
 
 
-def parse_thresholds(items: list[str]) -> dict[str, float]:
-    """
-    Parse ``ENV=VALUE`` items.
-
-    :param items: Items from the command line.
-    :return: Threshold per env id.
-    """
-    thresholds = {}
-    for item in items:
-        env_id, sep, value = item.rpartition("=")
-        number = parse_number(value) if sep else None
-        if number is None:
-            raise SystemExit(f"--threshold {item!r}: use ENV_ID=VALUE with a number, e.g. Pendulum-v1=-200")
-        thresholds[env_id] = number
-    return thresholds
-
-
 def check_run_arguments(args: argparse.Namespace, thresholds: dict[str, float], overrides: dict[str, Any]) -> None:
     """
     Refuse, with a message naming the flag, what a run would otherwise ignore or misread.
@@ -953,7 +933,7 @@ def check_run_arguments(args: argparse.Namespace, thresholds: dict[str, float], 
         if algo not in rl_zoo3.ALGOS:
             continue
         # rl-zoo passes every other key to the constructor, whose TypeError would end the batch at that run
-        params = set(inspect.signature(rl_zoo3.ALGOS[algo].__init__).parameters) - {"self", "env", "_init_setup_model"}
+        params = constructor_names(rl_zoo3.ALGOS[algo])
         zoo_keys = [*ZOO_KEYS, *(() if algo in sb3_es_algos() else ("noise_type", "noise_std"))]
         unknown = sorted(set(values) - params - set(zoo_keys))
         if unknown:

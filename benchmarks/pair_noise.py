@@ -22,7 +22,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 import shimmy
-from common import algorithm_classes, system_info
+from common import algorithm_classes, positive_problems, system_info
 from stable_baselines3.common.env_util import make_vec_env
 
 from sb3_es.common.population_algorithm import PopulationAlgorithm
@@ -55,8 +55,7 @@ def main(argv: list[str] | None = None) -> None:
         for flag, value in (("--pairs", args.pairs), ("--n-envs", args.n_envs))
         if value < 1
     ]
-    if args.sigma is not None and not args.sigma > 0:
-        problems.append(f"--sigma {args.sigma:g}: it must be positive")
+    problems += positive_problems({"--sigma": args.sigma})
     if args.episodes < 2:
         problems.append(f"--episodes {args.episodes}: it must be at least 2 (the variance over episodes needs two)")
     if args.sigma is None and args.algo != "PGPE":

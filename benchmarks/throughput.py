@@ -49,7 +49,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 import torch as th
-from common import hardware, measure_plain, versions
+from common import hardware, measure_plain, positive_problems, versions
 from sb3_contrib import ARS as ContribARS
 from sb3_contrib.common.vec_env import AsyncEval
 from stable_baselines3.common.callbacks import BaseCallback
@@ -467,9 +467,7 @@ def main(argv: list[str] | None = None) -> None:
         "--torch-threads", type=int, default=0, help="th.set_num_threads() in the main process (0: torch's default)"
     )
     args = parser.parse_args(argv)
-    problems = []
-    if args.seconds is not None and not args.seconds > 0:  # nan too
-        problems.append(f"--seconds {args.seconds:g}: it must be positive")
+    problems = positive_problems({"--seconds": args.seconds})
     if args.warmup is not None and not args.warmup >= 0:
         problems.append(f"--warmup {args.warmup:g}: it must be 0 or more")
     if args.quick and (args.seconds is not None or args.warmup is not None):

@@ -37,7 +37,7 @@ import gymnasium as gym
 import numpy as np
 import shimmy
 import yaml
-from common import PAPER_THRESHOLDS, read_value, selection_problems, step_count
+from common import PAPER_THRESHOLDS, parse_thresholds, positive_problems, selection_problems, step_count
 
 import sb3_es
 from sb3_es.zoo import default_conf_file, sb3_es_algos
@@ -406,22 +406,10 @@ def main(argv: list[str] | None = None) -> str:
         "--comments", action="store_true", help="with --table-only: also print each entry's YAML comment lines"
     )
     args = parser.parse_args(argv)
-    given = {}
-    for item in args.threshold:
-        env_id, sep, text = item.rpartition("=")
-        value = read_value(text) if sep else None
-        if isinstance(value, bool) or not isinstance(value, int | float):
-            raise SystemExit(f"--threshold {item!r}: use ENV_ID=VALUE with a number, e.g. Pendulum-v1=-200")
-        given[env_id] = float(value)
-    problems = [
-        f"{flag} {value}: it must be positive"
-        for flag, value in (
-            ("--max-steps", args.max_steps),
-            ("--max-seconds", args.max_seconds),
-            ("--eval-freq", args.eval_freq),
-        )
-        if value is not None and not value > 0
-    ]
+    given = parse_thresholds(args.threshold)
+    problems = positive_problems(
+        {"--max-steps": args.max_steps, "--max-seconds": args.max_seconds, "--eval-freq": args.eval_freq}
+    )
     unknown_algos = sorted(set(args.algos) - set(sb3_es_algos()))
     if unknown_algos:
         problems.append(f"--algos {unknown_algos}: not sb3-es algorithms (known: {sorted(sb3_es_algos())})")

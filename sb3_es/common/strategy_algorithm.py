@@ -173,7 +173,7 @@ class StrategyAlgorithm(ESBaseAlgorithm):
         assert self.strategy is not None
         for name, value in changed.items():
             if name in self.scheduled_hyperparameters and not callable(value):
-                if (name, value) != ("learning_rate", 0):  # load()'s "no update", as in _changed_hyperparameters
+                if name != "learning_rate":  # checked by load() already, with its "no update" 0
                     check_positive(name, value)
                 setattr(self.strategy, name, float(value))
             elif name in self.strategy_hyperparameters:

@@ -161,6 +161,11 @@ ZOO_KEYS = (
 )
 
 
+def constructor_names(cls: type[Any]) -> set[str]:
+    """:return: What ``cls``'s constructor takes besides the env (rl-zoo builds it): the names an entry may give."""
+    return set(inspect.signature(cls.__init__).parameters) - {"self", "env", "_init_setup_model"}
+
+
 def check_entry_names(conf: str, key: str | None, algo: str, names: Sequence[str]) -> None:
     """
     Refuse a name in the entry (or in ``-params``) that neither the algorithm's constructor nor rl-zoo takes; rl-zoo
@@ -172,7 +177,7 @@ def check_entry_names(conf: str, key: str | None, algo: str, names: Sequence[str
     :param names: The entry's keys and those of ``-params``.
     """
     cls = ALGOS[algo]
-    taken = set(inspect.signature(cls.__init__).parameters) - {"self", "env", "_init_setup_model"}
+    taken = constructor_names(cls)
     unknown = sorted(set(names) - taken - set(ZOO_KEYS))
     if unknown:
         raise UsageError(
