@@ -65,6 +65,34 @@ class ToyEnv(gym.Env):
         return self._obs(), reward, terminated, truncated, {}
 
 
+class SpaceEnv(gym.Env):
+    """
+    An env of given observation and action spaces: observations sampled from the space, a reward that depends on the
+    action, episodes of ``max_steps``. It records every action it receives in :attr:`actions`.
+    """
+
+    metadata: dict[str, Any] = {"render_modes": []}
+
+    def __init__(self, observation_space: spaces.Space, action_space: spaces.Space, max_steps: int = 5) -> None:
+        self.observation_space = observation_space
+        self.action_space = action_space
+        self.max_steps = max_steps
+        self.actions: list[Any] = []
+        self.t = 0
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[Any, dict]:
+        super().reset(seed=seed)
+        self.observation_space.seed(seed)
+        self.t = 0
+        return self.observation_space.sample(), {}
+
+    def step(self, action: Any) -> tuple[Any, float, bool, bool, dict]:
+        self.actions.append(action)
+        self.t += 1
+        reward = float(np.tanh(np.sum(np.asarray(action, dtype=np.float64)) * 1e-3))
+        return self.observation_space.sample(), reward, False, self.t >= self.max_steps, {}
+
+
 class ConstantObsEnv(gym.Env):
     """One-dimensional env with a constant observation ``[1]`` and episodes of ``length`` steps."""
 

@@ -27,7 +27,7 @@ from algorithms import (
     progress_bar_after_learn,
     spy_on_ask,
 )
-from envs import ConstantObsEnv, NaNRewardWrapper, ToyEnv, counting_env, read_csv, rollout
+from envs import ConstantObsEnv, NaNRewardWrapper, SpaceEnv, ToyEnv, counting_env, read_csv, rollout
 from stable_baselines3.common.callbacks import BaseCallback, StopTrainingOnMaxEpisodes
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.evaluation import evaluate_policy
@@ -410,3 +410,51 @@ def test_nan_rewards_after_training_leave_last_update(algo: Algo) -> None:
         model.learn(1, reset_num_timesteps=False)
     assert_identical(strategy_state(model), before)
     assert_updates(algo, model, 1)
+
+
+F32_MAX = float(np.finfo(np.float32).max)
+ACTION_SPACES = {
+    "int_box": gym.spaces.Box(0, 10, shape=(2,), dtype=np.int64),
+    "float32_limit_bounds": gym.spaces.Box(-F32_MAX, F32_MAX, shape=(2,), dtype=np.float32),
+    "box_3x2": gym.spaces.Box(np.arange(6.0).reshape(3, 2), np.arange(6.0).reshape(3, 2) + 1, dtype=np.float32),
+}
+
+
+@pytest.mark.parametrize("policy", ["MlpPolicy", None])
+@pytest.mark.parametrize("space", list(ACTION_SPACES))
+@pytest.mark.parametrize("algo", ALGORITHMS)
+def test_actions_stay_in_the_action_space(algo: Algo, space: str, policy: str | None) -> None:
+    """Integer Box actions are integers; bounds near the float32 limit give finite actions; a 2-D Box its own bounds."""
+    action_space = ACTION_SPACES[space]
+    obs_space = gym.spaces.Box(-1, 1, shape=(3,), dtype=np.float32)
+    env = DummyVecEnv([lambda: SpaceEnv(obs_space, action_space)] * 2)
+    model = algo.make(env, 4, policy=policy)
+    model.learn(60)
+    seen = [a for e in env.envs for a in e.unwrapped.actions]
+    assert seen and all(action_space.contains(np.asarray(a)) for a in seen), [a for a in seen[:3]]
+    actions, _ = model.predict(np.stack([obs_space.sample() for _ in range(3)]), deterministic=True)
+    assert actions.shape == (3, *action_space.shape)
+    assert all(action_space.contains(a) for a in actions), actions
+
+
+OBSERVATION_SPACES = {
+    "discrete_start": gym.spaces.Discrete(3, start=2),
+    "multidiscrete_start": gym.spaces.MultiDiscrete([2, 3], start=[1, -1]),
+    "scalar_box": gym.spaces.Box(-1, 1, shape=(), dtype=np.float32),
+}
+
+
+@pytest.mark.parametrize("space", list(OBSERVATION_SPACES))
+@pytest.mark.parametrize("algo", ALGORITHMS)
+def test_observation_spaces_learn_and_predict(algo: Algo, space: str) -> None:
+    """Discrete observations counted from a nonzero start, and a scalar Box, train and predict (single and batch)."""
+    obs_space = OBSERVATION_SPACES[space]
+    action_space = gym.spaces.Box(-1, 1, shape=(1,), dtype=np.float32)
+    model = algo.make(DummyVecEnv([lambda: SpaceEnv(obs_space, action_space)] * 2), 4)
+    model.learn(60)
+    obs_space.seed(0)
+    batch = np.stack([obs_space.sample() for _ in range(4)])
+    actions, _ = model.predict(batch, deterministic=True)
+    assert actions.shape == (4, 1)
+    single, _ = model.predict(batch[0], deterministic=True)
+    np.testing.assert_allclose(single, actions[0], rtol=1e-5)

@@ -337,3 +337,19 @@ def test_a_policy_saved_alone_loads_and_acts_the_same(env_id: str, tmp_path: Pat
     loaded = DiscretizedPolicy.load(tmp_path / "policy.zip")
     obs = np.stack([model.observation_space.sample() for _ in range(8)])
     np.testing.assert_array_equal(loaded.predict(obs, deterministic=True)[0], model.predict(obs, deterministic=True)[0])
+
+
+@pytest.mark.parametrize(
+    "space, obs, one_hot",
+    [
+        (spaces.Discrete(3, start=2), [2, 3, 4], np.eye(3)),
+        (spaces.MultiDiscrete([2, 3], start=[1, -1]), [[1, -1], [2, 1]], [[1, 0, 1, 0, 0], [0, 1, 0, 0, 1]]),
+    ],
+)
+def test_discrete_observations_with_a_start_are_one_hot_from_their_start(
+    space: spaces.Space, obs: Any, one_hot: Any
+) -> None:
+    """The lowest value is the first class, as for the population policies (SB3 alone fails on it)."""
+    policy = MlpPolicy(space, spaces.Discrete(2), lambda _: 1e-3)
+    features = policy.extract_features(th.as_tensor(np.asarray(obs)))
+    np.testing.assert_array_equal(features.numpy(), np.asarray(one_hot, dtype=np.float32))

@@ -30,7 +30,7 @@ from torch import nn
 
 from sb3_es.common.net_arch import split_net_arch
 from sb3_es.common.network_layout import network_layers
-from sb3_es.evaluation.network import OBS_NORM_EPS, NetworkSpec
+from sb3_es.evaluation.network import OBS_NORM_EPS, NetworkSpec, box_actions
 from sb3_es.evaluation.observations import flat_obs_dim
 from sb3_es.strategies.base import check_flag
 
@@ -268,6 +268,23 @@ class FlatPolicy(BasePolicy):
         if isinstance(self.action_space, spaces.Discrete):
             return th.as_tensor(out.argmax(axis=1) + int(self.action_space.start))
         return th.as_tensor(out)
+
+    def predict(
+        self,
+        observation: np.ndarray | dict[str, np.ndarray],
+        state: tuple[np.ndarray, ...] | None = None,
+        episode_start: np.ndarray | None = None,
+        deterministic: bool = False,
+    ) -> tuple[np.ndarray, tuple[np.ndarray, ...] | None]:
+        """SB3's ``predict``, with the actions of the population's networks (:func:`box_actions`)."""
+        actions, state = super().predict(observation, state, episode_start, deterministic)
+        if isinstance(self.action_space, spaces.Box) and not self.squash_output:
+            actions = box_actions(actions, self.action_space, squash_output=False)  # an integer Box: rounded
+        return actions, state
+
+    def unscale_action(self, scaled_action: np.ndarray) -> np.ndarray:
+        assert isinstance(self.action_space, spaces.Box)
+        return box_actions(scaled_action, self.action_space, squash_output=True)
 
 
 class MlpPolicy(FlatPolicy):

@@ -138,7 +138,8 @@ class NetworkSpec:
     A deterministic network over flat parameter vectors, with frozen observation statistics (picklable).
 
     Actions: for ``Discrete`` spaces the argmax of the outputs; for ``Box`` spaces the outputs rescaled from
-    ``[-1, 1]`` to the bounds when ``squash_output`` (the last layer is then a ``tanh``), else clipped to them.
+    ``[-1, 1]`` to the bounds when ``squash_output`` (the last layer is then a ``tanh``), else clipped to them
+    (:func:`box_actions`).
 
     :param observation_space: The observation space (``Box``, ``Discrete``, ``MultiDiscrete``, ``MultiBinary``, or a
         ``Dict`` of them).
@@ -231,11 +232,6 @@ class NetworkSpec:
                 x = layer(x)
         return x[:, :, 0]
 
-    @cached_property
-    def _action_bounds(self) -> tuple[tuple[int, ...], np.ndarray, np.ndarray]:
-        assert isinstance(self.action_space, spaces.Box)
-        return self.action_space.shape, self.action_space.low, self.action_space.high
-
     def __call__(self, params: np.ndarray, flat_obs: np.ndarray) -> np.ndarray:
         """
         Env actions of a population: row ``k`` of ``flat_obs`` through the network of parameter row ``k``.
@@ -248,11 +244,29 @@ class NetworkSpec:
         out = self.forward(params, self.normalize(flat_obs))
         if isinstance(self.action_space, spaces.Discrete):
             return out.argmax(axis=1) + int(self.action_space.start)
-        shape, low, high = self._action_bounds
-        actions = out.reshape((-1, *shape))
-        if self.squash_output:
-            return low + (0.5 * (actions + 1.0) * (high - low))
-        return np.clip(actions, low, high)
+        assert isinstance(self.action_space, spaces.Box)
+        return box_actions(out.reshape((-1, *self.action_space.shape)), self.action_space, self.squash_output)
+
+
+def box_actions(outputs: np.ndarray, action_space: spaces.Box, squash_output: bool) -> np.ndarray:
+    """
+    Env actions from a network's outputs, in the space's dtype: rescaled from ``[-1, 1]`` to the bounds (as SB3's
+    ``unscale_action``) or clipped to them, in float64 (bounds near the float32 limit would overflow ``high - low``),
+    and rounded to the nearest integer for an integer ``Box``.
+
+    :param outputs: Outputs ``(n, *action_space.shape)``.
+    :param action_space: A ``Box`` with finite bounds.
+    :param squash_output: Whether the outputs are in ``[-1, 1]`` (a ``tanh`` last layer) and rescaled.
+    :return: Actions ``(n, *action_space.shape)`` inside the space.
+    """
+    low, high = action_space.low.astype(np.float64), action_space.high.astype(np.float64)
+    if squash_output:
+        actions = low + 0.5 * (np.asarray(outputs, dtype=np.float64) + 1.0) * (high - low)
+    else:
+        actions = np.clip(np.asarray(outputs, dtype=np.float64), low, high)
+    if np.issubdtype(action_space.dtype, np.integer):
+        actions = np.clip(np.rint(actions), low, high)
+    return actions.astype(action_space.dtype, copy=False)
 
 
 @runtime_checkable

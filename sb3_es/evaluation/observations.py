@@ -2,10 +2,15 @@
 
 from __future__ import annotations
 
+from typing import TypeVar
+
 import numpy as np
 import torch as th
 from gymnasium import spaces
 from stable_baselines3.common.preprocessing import get_flattened_obs_dim, preprocess_obs
+
+#: A batch of observations, NumPy or torch.
+ObsT = TypeVar("ObsT", np.ndarray, th.Tensor)
 
 #: Observation spaces a network takes, alone or as the entries of a ``Dict``.
 FLAT_OBS_SPACES = (spaces.Box, spaces.Discrete, spaces.MultiDiscrete, spaces.MultiBinary)
@@ -36,15 +41,27 @@ def flat_obs_dim(observation_space: spaces.Space) -> int:
     )
 
 
+def counted_from_zero(obs: ObsT, space: spaces.Space) -> ObsT:
+    """
+    :param obs: A batch of observations of ``space`` (NumPy or torch).
+    :param space: Their space.
+    :return: For a ``Discrete`` or ``MultiDiscrete`` space with a ``start``, the values counted from 0, as SB3's
+        one-hot encoding counts them (``Discrete(3, start=1)`` holds 1, 2, 3); else ``obs`` unchanged.
+    """
+    if not (isinstance(space, spaces.Discrete | spaces.MultiDiscrete) and np.any(space.start)):
+        return obs
+    if isinstance(obs, th.Tensor):
+        return obs - th.as_tensor(space.start, device=obs.device, dtype=obs.dtype)  # type: ignore[return-value]
+    return obs - space.start  # type: ignore[no-any-return]
+
+
 def _flatten_entry(obs: np.ndarray, space: spaces.Space) -> np.ndarray:
     """
     :param obs: A batch of observations of ``space``.
     :param space: The space: a ``Box`` is flattened; other spaces go through SB3's ``preprocess_obs`` (one-hot).
     :return: ``(n, flat_dim)`` observations.
     """
-    obs = np.asarray(obs)
-    if isinstance(space, spaces.Discrete | spaces.MultiDiscrete) and np.any(space.start):
-        obs = obs - space.start  # SB3's one-hot counts from 0 (Discrete(3, start=1) holds 1, 2, 3)
+    obs = counted_from_zero(np.asarray(obs), space)
     if not isinstance(space, spaces.Box):
         obs = preprocess_obs(th.as_tensor(obs), space, normalize_images=False).numpy()  # type: ignore[union-attr]
     return obs.reshape(obs.shape[0], -1)

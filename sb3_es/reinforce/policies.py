@@ -24,6 +24,7 @@ import torch as th
 from gymnasium import spaces
 from stable_baselines3.common.distributions import (
     CategoricalDistribution,
+    Distribution,
     MultiCategoricalDistribution,
     make_proba_distribution,
 )
@@ -35,6 +36,7 @@ from torch import nn
 from sb3_es.common.arguments import base_arguments
 from sb3_es.common.net_arch import layer_sizes, split_net_arch
 from sb3_es.evaluation.network import flat_obs_dim
+from sb3_es.evaluation.observations import counted_from_zero
 from sb3_es.reinforce.legacy import upgrade_legacy_state_dict
 from sb3_es.strategies.base import check_count, check_flag
 
@@ -238,6 +240,31 @@ class DiscretizedPolicy(ActorCriticPolicy):
             optimizer_kwargs=self.optimizer_kwargs,
         )
 
+    # ------------------------------------------------------------------ observations
+    def as_sb3_obs(self, obs: PyTorchObs) -> PyTorchObs:
+        """
+        :param obs: Batch of observations.
+        :return: The observations as SB3's ``preprocess_obs`` takes them: discrete values counted from 0
+            (:func:`~sb3_es.evaluation.observations.counted_from_zero`), a scalar ``Box`` as ``(batch, 1)``.
+        """
+        if isinstance(obs, dict):
+            assert isinstance(self.observation_space, spaces.Dict)
+            return {key: counted_from_zero(value, self.observation_space[key]) for key, value in obs.items()}
+        obs = counted_from_zero(obs, self.observation_space)
+        if isinstance(self.observation_space, spaces.Box) and self.observation_space.shape == ():
+            obs = obs.reshape(-1, 1)
+        return obs  # type: ignore[return-value]
+
+    # SB3's entry points from observations to features (get_distribution and predict_values call BaseModel's
+    # extract_features directly, so each takes the observations as SB3 does here).
+    def extract_features(  # type: ignore[override]
+        self, obs: PyTorchObs, features_extractor: BaseFeaturesExtractor | None = None
+    ) -> th.Tensor | tuple[th.Tensor, th.Tensor]:
+        return super().extract_features(self.as_sb3_obs(obs), features_extractor)
+
+    def get_distribution(self, obs: PyTorchObs) -> Distribution:
+        return super().get_distribution(self.as_sb3_obs(obs))
+
     # ------------------------------------------------------------------ actions
     def forward(  # type: ignore[override]
         self, obs: PyTorchObs, deterministic: bool = False, generator: th.Generator | None = None
@@ -287,7 +314,7 @@ class DiscretizedPolicy(ActorCriticPolicy):
         """
         if not self.use_baseline:
             raise ValueError("This policy has no value network: create it with use_baseline=True.")
-        return super().predict_values(obs)
+        return super().predict_values(self.as_sb3_obs(obs))
 
     # ------------------------------------------------------------------ saves of sb3-es <= 0.x
     def _load_from_state_dict(self, state_dict: dict[str, Any], prefix: str, *args: Any) -> None:
