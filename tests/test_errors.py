@@ -585,3 +585,38 @@ def test_an_evaluator_on_another_env_is_named() -> None:
     model = ARS("LinearPolicy", "CartPole-v1", n_delta=2, evaluator=evaluator)
     with pytest.raises(ValueError, match=r"The evaluator's env has observation_space Box.*same env \(and wrappers\)"):
         model.learn(1)
+
+
+@pytest.mark.parametrize("algo", ALGORITHMS)
+def test_unknown_policy_kwargs_are_named_with_the_policys_arguments(algo: Algo) -> None:
+    """A key copied from another algorithm's rl-zoo entry (PPO's log_std_init) is named, with what the policy takes."""
+    with pytest.raises(TypeError, match=r"policy_kwargs \['log_std_init'\]: .* Its arguments are .*net_arch"):
+        algo.make("Pendulum-v1", 4, policy="MlpPolicy", policy_kwargs=dict(net_arch=[8], log_std_init=-1.0))
+
+
+@pytest.mark.parametrize("algo", ALGORITHMS)
+@pytest.mark.parametrize("value", ["tanh", th.nn.Tanh()], ids=["name", "instance"])
+def test_an_activation_fn_that_is_not_a_class_is_named(algo: Algo, value: Any) -> None:
+    with pytest.raises(TypeError, match=r"activation_fn=.*: pass a subclass of torch\.nn\..*Module, e\.g\. "):
+        algo.make("Pendulum-v1", 4, policy="MlpPolicy", policy_kwargs=dict(activation_fn=value))
+
+
+def test_reinforce_policy_flags_and_optimizer_class_are_checked() -> None:
+    with pytest.raises(TypeError, match=r"optimizer_class='adam': pass a subclass of torch\.optim"):
+        REINFORCE("MlpPolicy", "Pendulum-v1", policy_kwargs=dict(optimizer_class="adam"))
+    with pytest.raises(TypeError, match="ortho_init=.no.: it must be True or False"):
+        REINFORCE("MlpPolicy", "Pendulum-v1", policy_kwargs=dict(ortho_init="no"))
+
+
+@pytest.mark.parametrize("cls", [ARS, OpenES])
+def test_learning_rate_none_is_named(cls: type) -> None:
+    """None is for the algorithms without a learning rate of their own (CMA-ES, SimpleES)."""
+    with pytest.raises(TypeError, match="learning_rate=None: it must be a number"):
+        cls("LinearPolicy", "Pendulum-v1", learning_rate=None)
+
+
+@pytest.mark.parametrize("value", [np.bool_(True), np.bool_(False)])
+def test_cmaes_diagonal_takes_a_numpy_bool(value: np.bool_) -> None:
+    """As every other flag: kept as a Python bool (saved and compared as one)."""
+    model = CMAES("LinearPolicy", "Pendulum-v1", diagonal=value)
+    assert model.diagonal is bool(value)

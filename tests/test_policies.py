@@ -336,7 +336,10 @@ def test_linear_policy_rejects_net_arch() -> None:
 
 @pytest.mark.parametrize("activation_fn", ["tanh", nn.Tanh()])
 def test_activation_fn_must_be_a_module_class(activation_fn: Any) -> None:
-    with pytest.raises(TypeError, match=r"activation_fn=.*: pass the class of a torch activation module, e.g\."):
+    with pytest.raises(
+        TypeError,
+        match=r"activation_fn=.*: pass a subclass of torch\.nn\..*Module, e\.g\. activation_fn=torch\.nn\.Tanh",
+    ):
         MlpPolicy(OBS_BOX, ACT_BOX, activation_fn=activation_fn)
 
 

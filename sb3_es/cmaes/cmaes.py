@@ -86,6 +86,7 @@ class CMAES(PopulationAlgorithm):
         _init_setup_model: bool = True,
     ) -> None:
         check_positive_number("sigma", sigma)
+        diagonal = bool(diagonal) if isinstance(diagonal, np.bool_) else diagonal  # as every other flag
         if not (isinstance(diagonal, bool) or diagonal == "auto"):  # 1 == True: not a flag
             raise ValueError(f"diagonal={diagonal!r}: choose True, False or 'auto'.")
         super().__init__(**base_arguments(super().__init__, locals()))

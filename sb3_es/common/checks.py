@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import inspect
 import numbers
 from collections.abc import Iterable, Mapping
 from typing import Any
@@ -86,4 +87,43 @@ def check_policy_kwargs(policy_kwargs: Any) -> None:
         raise TypeError(
             f"policy_kwargs={policy_kwargs!r}: it must be a dict of the policy's keyword arguments, e.g. "
             'dict(net_arch=[64, 64]) (in an rl-zoo hyperparameter file, the string "dict(net_arch=[64, 64])").'
+        )
+
+
+def check_policy_kwarg_names(policy_class: type, policy_kwargs: Mapping[str, Any]) -> None:
+    """
+    Raise a clear error for ``policy_kwargs`` keys the policy does not take (e.g. ``log_std_init`` copied from
+    another algorithm's rl-zoo entry), naming the keys it takes. A policy whose ``__init__`` takes
+    ``**kwargs`` is not checked.
+
+    :param policy_class: The policy class.
+    :param policy_kwargs: The keyword arguments it will be built with.
+    """
+    parameters = inspect.signature(policy_class).parameters  # the constructor's, without self
+    if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in parameters.values()):
+        return
+    built = {"observation_space", "action_space", "lr_schedule", "use_baseline"}  # given by the algorithm
+    taken = [name for name in parameters if name not in built]
+    unknown = sorted(set(policy_kwargs) - set(taken))
+    if unknown:
+        raise TypeError(
+            f"policy_kwargs {unknown}: {policy_class.__name__} takes no such argument. Its arguments are "
+            f"{', '.join(taken)}; remove the others (an option of another algorithm's policy, such as PPO's "
+            "log_std_init, has no counterpart here)."
+        )
+
+
+def check_module_class(name: str, value: Any, base: type, example: str) -> None:
+    """
+    Raise a clear error unless ``value`` is a subclass of ``base`` (a class, as SB3's ``policy_kwargs`` take it).
+
+    :param name: The argument's name, for the message.
+    :param value: The value given.
+    :param base: The class it must derive from.
+    :param example: A valid value, for the message.
+    """
+    if not (isinstance(value, type) and issubclass(value, base)):
+        raise TypeError(
+            f"{name}={value!r}: pass a subclass of {base.__module__}.{base.__qualname__}, e.g. {name}={example} "
+            "(a class, not an instance or a name), as in SB3's policy_kwargs."
         )

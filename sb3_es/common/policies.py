@@ -28,6 +28,7 @@ from stable_baselines3.common.torch_layers import create_mlp
 from stable_baselines3.common.type_aliases import PyTorchObs
 from torch import nn
 
+from sb3_es.common.checks import check_module_class
 from sb3_es.common.net_arch import split_net_arch
 from sb3_es.common.network_layout import network_layers
 from sb3_es.evaluation.network import OBS_NORM_EPS, NetworkSpec, box_actions
@@ -112,11 +113,7 @@ class FlatPolicy(BasePolicy):
         self.obs_dim = obs_dim
         self.action_dim = action_dim
         self.net_arch = [64, 64] if pi_arch is None else pi_arch
-        if not (isinstance(activation_fn, type) and issubclass(activation_fn, nn.Module)):
-            raise TypeError(
-                f"activation_fn={activation_fn!r}: pass the class of a torch activation module, e.g. "
-                "activation_fn=torch.nn.Tanh (not an instance or a name), as in SB3's policy_kwargs."
-            )
+        check_module_class("activation_fn", activation_fn, nn.Module, "torch.nn.Tanh")
         self.activation_fn = activation_fn
         self.with_bias = with_bias
         self.layer_norm = check_flag("layer_norm", layer_norm)

@@ -130,7 +130,9 @@ class PopulationAlgorithm(StrategyAlgorithm):
         self._env_id = env if isinstance(env, str) else None
         super().__init__(**base_arguments(super().__init__, locals()))
         self._check_live_values({"n_eval_episodes": n_eval_episodes})
-        if self.learning_rate is not None:  # as ESBaseAlgorithm keeps it (a constant schedule's number, ...)
+        # As ESBaseAlgorithm keeps it (a constant schedule's number, ...); None only where the algorithm has no
+        # learning rate of its own (a scheduled one must be given).
+        if self.learning_rate is not None or "learning_rate" in self.scheduled_hyperparameters:
             check_positive("learning_rate", self.learning_rate)
         self.n_eval_episodes = int(n_eval_episodes)
         self.common_seeds = check_flag("common_seeds", common_seeds)

@@ -17,7 +17,7 @@ from stable_baselines3.common.type_aliases import Schedule
 from stable_baselines3.common.vec_env import VecEnv, unwrap_vec_normalize
 
 from sb3_es.common.base_class import ESBaseAlgorithm
-from sb3_es.common.checks import check_policy_class, check_positive, check_scheduled_value
+from sb3_es.common.checks import check_policy_class, check_policy_kwarg_names, check_positive, check_scheduled_value
 from sb3_es.common.policies import FlatPolicy, check_action_space
 from sb3_es.strategies import Strategy
 from sb3_es.strategies.base import Population, check_count
@@ -93,6 +93,7 @@ class StrategyAlgorithm(ESBaseAlgorithm):
             self._setup_lr_schedule()  # SB3's lr_schedule attribute, as in SB3; _ask() applies the schedule
         BaseAlgorithm.set_random_seed(self, self.seed)  # not _reseed_streams: a loaded model continues its own
         check_policy_class(self._algorithm_name, self.policy_class, FlatPolicy, self.policy_aliases)
+        check_policy_kwarg_names(self.policy_class, self.policy_kwargs)
         policy = self.policy_class(self.observation_space, self.action_space, **self.policy_kwargs)
         assert isinstance(policy, FlatPolicy)  # checked above
         self.policy = policy.to(self.device)

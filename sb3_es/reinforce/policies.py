@@ -34,6 +34,7 @@ from stable_baselines3.common.type_aliases import PyTorchObs, Schedule
 from torch import nn
 
 from sb3_es.common.arguments import base_arguments
+from sb3_es.common.checks import check_module_class
 from sb3_es.common.net_arch import layer_sizes, split_net_arch
 from sb3_es.evaluation.network import flat_obs_dim
 from sb3_es.evaluation.observations import counted_from_zero
@@ -134,6 +135,10 @@ class DiscretizedPolicy(ActorCriticPolicy):
         check_action_space(action_space)
         flat_obs_dim(observation_space)  # a clear error for an observation space the network cannot take
         joint = check_flag("joint", joint)
+        ortho_init = check_flag("ortho_init", ortho_init)
+        normalize_images = check_flag("normalize_images", normalize_images)
+        check_module_class("activation_fn", activation_fn, nn.Module, "torch.nn.Tanh")
+        check_module_class("optimizer_class", optimizer_class, th.optim.Optimizer, "torch.optim.Adam")
         # n_bins=3 (the default) is what a saved policy's constructor parameters hold for Discrete actions
         if isinstance(action_space, spaces.Discrete) and (n_bins not in (None, DEFAULT_N_BINS) or joint):
             raise ValueError(

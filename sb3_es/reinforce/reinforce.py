@@ -22,7 +22,12 @@ from torch.nn import functional as F
 
 from sb3_es.common.arguments import base_arguments
 from sb3_es.common.base_class import ESBaseAlgorithm, constant_value, python_number
-from sb3_es.common.checks import check_policy_class, check_policy_kwargs, check_scheduled_value
+from sb3_es.common.checks import (
+    check_policy_class,
+    check_policy_kwarg_names,
+    check_policy_kwargs,
+    check_scheduled_value,
+)
 from sb3_es.evaluation.time_limit import end_capped_episodes
 from sb3_es.reinforce.episodes import EpisodeBatch, EpisodeCollector, check_rewards
 from sb3_es.reinforce.legacy import upgrade_legacy_optimizer_state
@@ -173,6 +178,7 @@ class REINFORCE(ESBaseAlgorithm):
         self._setup_lr_schedule()
         BaseAlgorithm.set_random_seed(self, self.seed)  # not _reseed_streams: a loaded model continues its own
         check_policy_class("REINFORCE", self.policy_class, DiscretizedPolicy, self.policy_aliases)
+        check_policy_kwarg_names(self.policy_class, self.policy_kwargs)
         self.policy = self.policy_class(  # type: ignore[assignment]
             self.observation_space,
             self.action_space,
