@@ -126,6 +126,18 @@ def test_loaded_model_needs_env_to_learn(saved: Saved, reset_num_timesteps: bool
 
 # ---------------------------------------------------------------------------- parameters
 @pytest.mark.parametrize("algo", ALGORITHMS)
+def test_set_parameters_refuses_non_finite_values(algo: Algo) -> None:
+    model = build(algo)
+    before = policy_state(model)
+    params = model.get_parameters()
+    key = next(k for k, v in params["policy"].items() if v.is_floating_point() and v.numel())
+    params["policy"][key] = params["policy"][key].clone().fill_(float("nan"))
+    with pytest.raises(ValueError, match=rf"policy\['{key}'\] holds NaN or infinite values; nothing was set"):
+        model.set_parameters(params)
+    assert_identical(policy_state(model), before)
+
+
+@pytest.mark.parametrize("algo", ALGORITHMS)
 def test_get_set_parameters(algo: Algo) -> None:
     source = build(algo)
     source.learn(2 * GENERATION)

@@ -303,6 +303,10 @@ class ESBaseAlgorithm(BaseAlgorithm):
             params: dict[str, Any] = load_path_or_dict
         else:
             _, params = check_save_file(load_path_or_dict, type(self), method="set_parameters")
+        for name, state in params.items():
+            bad = [key for key, value in state.items() if th.is_tensor(value) and not th.isfinite(value).all()]
+            if bad:  # the search would start from them, and fail later with a message about the rewards
+                raise ValueError(f"set_parameters(): {name}[{bad[0]!r}] holds NaN or infinite values; nothing was set.")
         super().set_parameters(self._upgrade_saved_params(params), exact_match=exact_match, device=device)
 
     def _upgrade_saved_params(self, params: dict[str, Any]) -> dict[str, Any]:
