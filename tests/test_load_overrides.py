@@ -317,3 +317,14 @@ def test_custom_objects_of_a_subclass_taking_kwargs_replace_as_in_sb3(tmp_path: 
     Wrapped("LinearPolicy", "Pendulum-v1", n_delta=2).save(tmp_path / "wrapped.zip")
     model = Wrapped.load(tmp_path / "wrapped.zip", custom_objects={"learning_rate": 2e-5, "dummy": 1.0})
     assert model.learning_rate == 2e-5
+
+
+def test_openes_with_a_learning_rate_decay_takes_rl_zoos_enjoy_objects(tmp_path: Path) -> None:
+    """A decayed learning rate's floor check does not turn learning_rate=0 (no update) away."""
+    model = OpenES("LinearPolicy", "Pendulum-v1", population_size=4, learning_rate_decay=0.99, seed=0)
+    model.learn(1)
+    model.save(tmp_path / "model.zip")
+    loaded = OpenES.load(tmp_path / "model.zip", custom_objects={"learning_rate": 0.0}, env=model.get_env())
+    before = loaded.policy.parameters_to_vector()
+    loaded.learn(1, reset_num_timesteps=False)
+    np.testing.assert_array_equal(loaded.policy.parameters_to_vector(), before)

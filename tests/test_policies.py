@@ -332,6 +332,10 @@ def test_linear_policy_rejects_net_arch() -> None:
         LinearPolicy(OBS_BOX, ACT_BOX, net_arch=[16])
     # An empty net_arch is a linear policy and is accepted.
     assert LinearPolicy(OBS_BOX, ACT_BOX, net_arch=[]).num_params == 3 * 2
+    # So is SB3's actor-critic form of it; a value network is refused as for MlpPolicy.
+    assert LinearPolicy(OBS_BOX, ACT_BOX, net_arch=dict(pi=[])).num_params == 3 * 2
+    with pytest.raises(ValueError, match="no value network"):
+        LinearPolicy(OBS_BOX, ACT_BOX, net_arch=dict(pi=[], vf=[8]))
 
 
 @pytest.mark.parametrize("activation_fn", ["tanh", nn.Tanh()])

@@ -321,7 +321,7 @@ class LinearPolicy(FlatPolicy):
         activation_fn: type[nn.Module] = nn.ReLU,
         layer_norm: bool = False,
     ) -> None:
-        if net_arch:
+        if split_net_arch(net_arch)[0]:  # [] and SB3's dict(pi=[]) are the linear network
             raise ValueError(f"LinearPolicy has no hidden layers (got net_arch={net_arch}); use MlpPolicy instead.")
         if layer_norm or activation_fn is not nn.ReLU:
             raise ValueError(
@@ -331,7 +331,7 @@ class LinearPolicy(FlatPolicy):
         super().__init__(
             observation_space,
             action_space,
-            net_arch=[],
+            net_arch=net_arch if isinstance(net_arch, dict) else [],  # a vf entry is refused there
             activation_fn=activation_fn,
             with_bias=with_bias,
             squash_output=squash_output,

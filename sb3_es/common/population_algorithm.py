@@ -51,8 +51,8 @@ class PopulationAlgorithm(StrategyAlgorithm):
 
     :param policy: Policy class or alias (``"MlpPolicy"``, ``"LinearPolicy"``).
     :param env: Environment, env id, or VecEnv. Every env slot evaluates a different candidate.
-    :param learning_rate: Step size (float or schedule) of the algorithms that have one (``None`` for those,
-        like CMA-ES, that adapt their own); its meaning depends on the algorithm.
+    :param learning_rate: Step size (float or schedule) of ARS and OpenES, its meaning their own; the algorithms
+        without one (CMA-ES, PGPE, SimpleES) take no such argument and pass ``None``.
     :param n_eval_episodes: Episodes per candidate.
     :param common_seeds: Common random numbers: the candidates that the strategy compares with each other start
         their episodes from the same states (the same reset seed for the e-th episode of each): the two members of

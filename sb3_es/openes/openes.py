@@ -50,7 +50,8 @@ def check_decays(
             check_non_negative(f"{name}_limit", limit)
         if not 0 < check_number(f"{name}_decay", rate) <= 1:
             raise ValueError(f"{name}_decay={rate}: it must be in (0, 1].")
-        if limit is not None and rate != 1 and not callable(value) and value <= limit:  # estool: only above it
+        # estool decays only above the limit; 0 (load(learning_rate=0), no update, as rl-zoo's enjoy gives) is no start
+        if limit is not None and rate != 1 and not callable(value) and 0 < value <= limit:
             raise ValueError(
                 f"{name}_decay={rate} would never apply: {name}={value} starts at or below {name}_limit={limit}, "
                 f"where the decay stops. Lower {name}_limit, or leave {name}_decay at 1."
