@@ -362,6 +362,14 @@ def test_load_zip_with_a_damaged_strategy(
         algo.cls.load(tmp_path / "damaged.zip")
 
 
+@pytest.mark.parametrize("algo", POPULATION_ALGORITHMS)
+def test_load_of_a_save_without_its_strategy_says_so(algo: Algo, tmp_path: Path) -> None:
+    model = build(algo)
+    model.save(tmp_path / "model.zip", exclude=["strategy"])
+    with pytest.raises(ValueError, match=r"holds no strategy state \(saved with save\(exclude=\['strategy'\]\)\?\)"):
+        algo.cls.load(tmp_path / "model.zip")
+
+
 @pytest.fixture(scope="module")
 def ppo_save(tmp_path_factory: pytest.TempPathFactory) -> Path:
     path = tmp_path_factory.mktemp("ppo") / "ppo.zip"

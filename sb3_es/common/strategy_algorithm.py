@@ -256,7 +256,13 @@ class StrategyAlgorithm(ESBaseAlgorithm):
 
     @classmethod
     def _check_save_data(cls, path: str | pathlib.Path | io.BufferedIOBase, data: dict[str, Any]) -> None:
-        if not isinstance(data.get("strategy"), Strategy):
+        if "strategy" not in data:
+            raise ValueError(
+                f"Cannot load {path!r}: it holds no strategy state (saved with save(exclude=['strategy'])?), so "
+                "training could not continue where it stopped. Save the model without excluding it; for the policy "
+                "alone, use set_parameters(path) on a new model."
+            )
+        if not isinstance(data["strategy"], Strategy):
             raise ValueError(
                 f"Cannot load {path!r}: the saved strategy state could not be read (the file is damaged or was "
                 "written by an incompatible version), so training could not continue where it stopped."
