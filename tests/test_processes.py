@@ -345,6 +345,36 @@ def test_an_interrupted_call_leaves_no_reply_for_the_next_generation(monkeypatch
         np.testing.assert_array_equal(result.returns, local.returns)
 
 
+def test_a_ctrl_c_while_the_workers_are_stopped_is_held_until_all_are(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A second Ctrl-C (one during the stop that follows the first) must not leave a worker running with its reply
+    unread, for the next generation to take as its own."""
+    policy = toy_policy()
+    population = toy_population(policy, 4)
+    evaluator = ProcessEvaluator(ToyEnv, num_workers=2, envs_per_worker=2)
+    evaluator.start()
+    running = list(evaluator._workers)
+    first = running[0]
+    kill = first.kill
+
+    def kill_then_ctrl_c() -> None:
+        kill()
+        os.kill(os.getpid(), signal.SIGINT)
+
+    monkeypatch.setattr(first, "kill", kill_then_ctrl_c)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            evaluator.close()
+        assert not any(process.is_alive() for process in running)
+        result = evaluator.evaluate(policy, population, population[0], 1, seed=0)
+        local = VecEnvEvaluator(make_vec_env(ToyEnv, n_envs=4)).evaluate(policy, population, population[0], 1, seed=0)
+        np.testing.assert_array_equal(result.returns, local.returns)
+    finally:
+        monkeypatch.undo()
+        evaluator.close()
+        for process in running:
+            process.kill()
+
+
 def test_bad_arguments() -> None:
     with pytest.raises(ValueError, match="env instance"):
         ProcessEvaluator(ToyEnv())  # type: ignore[arg-type]

@@ -295,6 +295,30 @@ def test_an_env_error_is_raised_at_once(host: str, tmp_path: Path) -> None:
         assert workers(evaluator) == []
 
 
+def test_a_replacements_start_is_not_counted_in_generation_timeout(
+    host: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A worker dies; its replacement takes longer to start than the whole generation_timeout (start_timeout bounds
+    it): the generation completes."""
+    policy = toy_policy()
+    population = toy_population(policy, 4)
+
+    def env() -> CrashingToyEnv:
+        return CrashingToyEnv(str(tmp_path / "crashed"), str(tmp_path / "no_error"), crash_step=2)
+
+    with make_evaluator(host, env, num_workers=2, envs_per_worker=2, generation_timeout=1.0) as evaluator:
+        replace = evaluator._replace
+
+        def slow_replace(*args: Any) -> None:
+            time.sleep(1.5)
+            replace(*args)
+
+        monkeypatch.setattr(evaluator, "_replace", slow_replace)
+        result = evaluator.evaluate(policy, population, population[0], 1, seed=0)
+        assert evaluator.restarted_workers == 1
+        assert len(result.returns) == 4
+
+
 def test_faults(host: str, tmp_path: Path, caplog: pytest.LogCaptureFixture, monkeypatch: pytest.MonkeyPatch) -> None:
     crash_flag, error_flag = str(tmp_path / "crashed"), str(tmp_path / "error")
     policy = toy_policy()

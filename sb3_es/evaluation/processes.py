@@ -15,14 +15,17 @@ their pipe closes, and are daemons, so that none outlives the driver.
 
 from __future__ import annotations
 
+import contextlib
 import gc
 import math
 import multiprocessing as mp
 import os
 import pickle
+import signal
 import sys
+import threading
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from multiprocessing.connection import wait
 from typing import Any
 
@@ -37,6 +40,26 @@ from sb3_es.evaluation.process_worker import DRIVER_ENDS, raise_remote, worker_m
 from sb3_es.evaluation.sharded import ShardedEvaluator
 from sb3_es.evaluation.worker import DEFAULT_ENVS_PER_WORKER, WorkerEnvArgs, env_config
 from sb3_es.strategies.noise import SharedNoiseTable
+
+
+@contextlib.contextmanager
+def sigint_deferred() -> Iterator[None]:
+    """
+    Hold back SIGINT (Ctrl-C) in the block and deliver it after, to the handler of before (``KeyboardInterrupt`` by
+    default). Outside the main thread, where Python cannot set a handler, nothing is held back.
+    """
+    previous = signal.getsignal(signal.SIGINT)
+    if threading.current_thread() is not threading.main_thread() or previous is None:
+        yield
+        return
+    received: list[int] = []
+    signal.signal(signal.SIGINT, lambda signum, frame: received.append(signum))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        if received:
+            signal.raise_signal(signal.SIGINT)
 
 
 class ProcessPool(WorkerPool):
@@ -131,20 +154,20 @@ class ProcessPool(WorkerPool):
         raise WorkerDied(f"worker process {process.pid} ended with exit code {process.exitcode}")
 
     def close(self) -> None:
-        if os.getpid() != self._owner:  # a copy inherited by a forked process: the workers are not its children
-            self.processes, self._conns, self._stops, self._tables, self._inbox = [], [], [], [], {}
-            return
-        for k, process in enumerate(self.processes):
-            if process is None:
-                continue
-            if process.is_alive():
-                process.kill()  # SIGKILL: a worker may be in the middle of an episode, or stuck in the env
-            process.join(5.0)
-            conn = self._conns[k]
-            if conn is not None:
-                conn.close()
-                DRIVER_ENDS.discard(conn)
+        processes, conns = self.processes, self._conns
+        # Forgotten first: a close cut short (a second Ctrl-C) leaves no worker or unread reply for the next start.
         self.processes, self._conns, self._stops, self._tables, self._inbox = [], [], [], [], {}
+        if os.getpid() != self._owner:  # a copy inherited by a forked process: the workers are not its children
+            return
+        with sigint_deferred():  # a Ctrl-C while the workers are stopped is raised once they all are
+            for process, conn in zip(processes, conns, strict=True):
+                if process is not None:
+                    if process.is_alive():
+                        process.kill()  # SIGKILL: a worker may be in the middle of an episode, or stuck in the env
+                    process.join(5.0)
+                if conn is not None:
+                    conn.close()
+                    DRIVER_ENDS.discard(conn)
 
     def publish(self, payload: dict[str, Any]) -> Any:
         return cloudpickle.dumps(payload, protocol=pickle.HIGHEST_PROTOCOL)

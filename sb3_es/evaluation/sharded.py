@@ -246,9 +246,12 @@ class ShardedEvaluator(PopulationEvaluator, ABC):
         restarts = 0
 
         def replace(k: int, error: WorkerDied) -> None:
-            nonlocal restarts
+            nonlocal restarts, deadline
             restarts += 1
+            started = time.monotonic()
             self._replace(pool, k, error, restarts)
+            if deadline is not None:  # the replacement's start is bounded by start_timeout, not counted here
+                deadline += time.monotonic() - started
 
         def submit(k: int, lingering: bool) -> None:
             while True:
