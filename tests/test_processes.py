@@ -361,6 +361,7 @@ def test_a_ctrl_c_while_the_workers_are_stopped_is_held_until_all_are(monkeypatc
         os.kill(os.getpid(), signal.SIGINT)
 
     monkeypatch.setattr(first, "kill", kill_then_ctrl_c)
+    handler = signal.signal(signal.SIGINT, signal.default_int_handler)  # as in a terminal (a background job ignores it)
     try:
         with pytest.raises(KeyboardInterrupt):
             evaluator.close()
@@ -369,6 +370,7 @@ def test_a_ctrl_c_while_the_workers_are_stopped_is_held_until_all_are(monkeypatc
         local = VecEnvEvaluator(make_vec_env(ToyEnv, n_envs=4)).evaluate(policy, population, population[0], 1, seed=0)
         np.testing.assert_array_equal(result.returns, local.returns)
     finally:
+        signal.signal(signal.SIGINT, handler)
         monkeypatch.undo()
         evaluator.close()
         for process in running:
