@@ -8,6 +8,7 @@ import io
 import numbers
 import pathlib
 import warnings
+from collections.abc import Mapping
 from typing import Any, ClassVar, TypeVar
 
 import gymnasium as gym
@@ -304,6 +305,8 @@ class ESBaseAlgorithm(BaseAlgorithm):
         else:
             _, params = check_save_file(load_path_or_dict, type(self), method="set_parameters")
         for name, state in params.items():
+            if not isinstance(state, Mapping):  # malformed: SB3's set_parameters names it
+                continue
             bad = [key for key, value in state.items() if th.is_tensor(value) and not th.isfinite(value).all()]
             if bad:  # the search would start from them, and fail later with a message about the rewards
                 raise ValueError(f"set_parameters(): {name}[{bad[0]!r}] holds NaN or infinite values; nothing was set.")
