@@ -43,7 +43,7 @@ from sb3_es.strategies.noise import SharedNoiseTable
 
 
 @contextlib.contextmanager
-def sigint_deferred() -> Iterator[None]:
+def _sigint_deferred() -> Iterator[None]:
     """
     Hold back SIGINT (Ctrl-C) in the block and deliver it after, to the handler of before (``KeyboardInterrupt`` by
     default). Outside the main thread, where Python cannot set a handler, nothing is held back.
@@ -159,7 +159,7 @@ class ProcessPool(WorkerPool):
         self.processes, self._conns, self._stops, self._tables, self._inbox = [], [], [], [], {}
         if os.getpid() != self._owner:  # a copy inherited by a forked process: the workers are not its children
             return
-        with sigint_deferred():  # a Ctrl-C while the workers are stopped is raised once they all are
+        with _sigint_deferred():  # a Ctrl-C while the workers are stopped is raised once they all are
             for process, conn in zip(processes, conns, strict=True):
                 if process is not None:
                     if process.is_alive():

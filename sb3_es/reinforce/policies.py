@@ -246,7 +246,7 @@ class DiscretizedPolicy(ActorCriticPolicy):
         )
 
     # ------------------------------------------------------------------ observations
-    def as_sb3_obs(self, obs: PyTorchObs) -> PyTorchObs:
+    def _as_sb3_obs(self, obs: PyTorchObs) -> PyTorchObs:
         """
         :param obs: Batch of observations.
         :return: The observations as SB3's ``preprocess_obs`` takes them: discrete values counted from 0
@@ -265,10 +265,10 @@ class DiscretizedPolicy(ActorCriticPolicy):
     def extract_features(  # type: ignore[override]
         self, obs: PyTorchObs, features_extractor: BaseFeaturesExtractor | None = None
     ) -> th.Tensor | tuple[th.Tensor, th.Tensor]:
-        return super().extract_features(self.as_sb3_obs(obs), features_extractor)
+        return super().extract_features(self._as_sb3_obs(obs), features_extractor)
 
     def get_distribution(self, obs: PyTorchObs) -> Distribution:
-        return super().get_distribution(self.as_sb3_obs(obs))
+        return super().get_distribution(self._as_sb3_obs(obs))
 
     # ------------------------------------------------------------------ actions
     def forward(  # type: ignore[override]
@@ -319,7 +319,7 @@ class DiscretizedPolicy(ActorCriticPolicy):
         """
         if not self.use_baseline:
             raise ValueError("This policy has no value network: create it with use_baseline=True.")
-        return super().predict_values(self.as_sb3_obs(obs))
+        return super().predict_values(self._as_sb3_obs(obs))
 
     # ------------------------------------------------------------------ saves of sb3-es <= 0.x
     def _load_from_state_dict(self, state_dict: dict[str, Any], prefix: str, *args: Any) -> None:
