@@ -12,6 +12,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 from typing import Any
@@ -389,14 +390,35 @@ def test_bad_arguments() -> None:
         ProcessEvaluator("Pendulum-v1", max_worker_restarts=-1)
     with pytest.raises(ValueError, match=r"SubprocVecEnv: worker processes are daemons .* \(num_workers=\)"):
         ProcessEvaluator("Pendulum-v1", vec_env_cls=SubprocVecEnv)
+    with pytest.raises(TypeError, match="linger='False': it must be True or False"):
+        ProcessEvaluator("Pendulum-v1", linger="False")  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="start_method='thread'"):
         ProcessEvaluator("Pendulum-v1", start_method="thread")
     with pytest.raises(TypeError, match="env_kwarg: the env arguments of a worker are wrapper_class, env_kwargs"):
         ProcessEvaluator("Pendulum-v1", env_kwarg={"g": 9.0})  # type: ignore[call-arg]
+    lock = threading.Lock()  # every worker gets a copy of the env arguments: one that does not pickle is named now
+    with pytest.raises(TypeError, match=r"env=<function .* does not pickle \(TypeError: cannot pickle '_thread.lock'"):
+        ProcessEvaluator(lambda: ToyEnv() if lock else ToyEnv())
+    with pytest.raises(TypeError, match=r"env_kwargs=\{'g': <unlocked _thread.lock .*inside the env factory"):
+        ProcessEvaluator("Pendulum-v1", env_kwargs={"g": lock})
     evaluator = ProcessEvaluator("NoSuchEnv-v0", num_workers=1)
     with pytest.raises(Exception, match="NoSuchEnv"):
         evaluator.start()
     assert evaluator._workers == []
+
+
+def test_an_env_registered_by_the_script_is_named_in_a_spawned_worker() -> None:
+    gym.register("ScriptOnlyPendulum-v0", entry_point="gymnasium.envs.classic_control:PendulumEnv")
+    try:
+        evaluator = ProcessEvaluator("ScriptOnlyPendulum-v0", num_workers=1, start_method="spawn")
+        with pytest.raises(
+            gym.error.NameNotFound,
+            match=r"ScriptOnlyPendulum.* \(in a worker process\)\. An env "
+            r"registered by your script .*'my_package.envs:MyEnv-v0'.*or pass an env factory",
+        ):
+            evaluator.start()
+    finally:
+        gym.registry.pop("ScriptOnlyPendulum-v0")
 
 
 #: Opens the driver scripts below (as run): a driver dies with the test process should pytest itself be killed mid-test

@@ -24,7 +24,7 @@ from stable_baselines3.common.vec_env import VecEnv
 from sb3_es.evaluation.base import Generation, PopulationEvaluator, PopulationResult, StepHook
 from sb3_es.evaluation.pool import WorkerDied, WorkerPool
 from sb3_es.evaluation.replay import replay
-from sb3_es.strategies.base import check_count
+from sb3_es.strategies.base import check_count, check_flag
 from sb3_es.strategies.noise import NoiseTablePopulation
 
 logger = logging.getLogger(__name__)
@@ -110,7 +110,7 @@ class ShardedEvaluator(PopulationEvaluator, ABC):
         self.start_timeout = float(start_timeout)
         self.max_restarts = max_restarts
         self.generation_timeout = generation_timeout
-        self.linger = bool(linger)
+        self.linger = check_flag("linger", linger)
         #: Number of workers replaced after they died, over the evaluator's life.
         self.restarted_workers = 0
         #: Wall-clock origin (``time.time()``) of the workers' ``Monitor``: an episode's ``t`` is measured from it. The

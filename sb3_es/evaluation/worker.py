@@ -14,6 +14,7 @@ import time
 from collections.abc import Callable
 from typing import Any, TypedDict
 
+import cloudpickle
 import gymnasium as gym
 import numpy as np
 from stable_baselines3.common.env_util import make_vec_env
@@ -45,7 +46,15 @@ def make_env_fn(env: str | Callable[..., gym.Env]) -> Callable[..., gym.Env]:
         env_id = env
 
         def make(**kwargs: Any) -> gym.Env:
-            return gym.make(env_id, **kwargs)
+            try:
+                return gym.make(env_id, **kwargs)
+            except gym.error.UnregisteredEnv as error:
+                raise type(error)(
+                    f"{error} (in a worker process). An env registered by your script (gymnasium.register) is not "
+                    "registered in workers that do not start as a fork of it (Ray's actors, start_method='spawn'): "
+                    "give the id as 'my_package.envs:MyEnv-v0' (gym.make imports my_package.envs first), or pass "
+                    "an env factory."
+                ) from error
 
         return make
     return env
@@ -94,9 +103,18 @@ def env_config(
             f"Unexpected keyword argument(s) {', '.join(unknown)}: the env arguments of a worker are "
             f"{', '.join(WorkerEnvArgs.__annotations__)} (those of SB3's make_vec_env)."
         )
-    config: dict[str, Any] = dict(env_args)
+    config: dict[str, Any] = dict(env=env, n_envs=envs_per_worker, **env_args)
     config["vec_env_cls"] = config.get("vec_env_cls") or DummyVecEnv
-    return dict(env=env, n_envs=envs_per_worker, **config)
+    for name, value in config.items():  # every worker gets a copy: refused here, not at the first learn()
+        try:
+            cloudpickle.dumps(value)
+        except Exception as error:
+            raise TypeError(
+                f"{name}={value!r} does not pickle ({type(error).__name__}: {error}), and every worker gets a copy: "
+                "create what does not pickle (a lock, an open file, an env instance, a client) inside the env "
+                "factory, or pass a registered env id."
+            ) from error
+    return config
 
 
 class ShareRunner:
