@@ -299,7 +299,8 @@ class ProcessEvaluator(ShardedEvaluator):
     Same driver as :class:`~sb3_es.evaluation.ray.RayEvaluator` (:class:`~sb3_es.evaluation.sharded.ShardedEvaluator`):
     shares, seeds (share ``k`` uses ``seed + k * envs_per_worker``), lingering, callback replay, replacement of a
     worker that dies (its share re-run), exact merge of the observation statistics. With a given seed and
-    ``num_workers``, the candidates' returns and so the parameters are reproducible; ``num_timesteps`` also counts
+    ``num_workers``, the candidates' returns and so the parameters are reproducible (not with a scheduled
+    hyperparameter, which follows ``num_timesteps``, unless ``linger=False``); ``num_timesteps`` also counts
     the center-policy steps of lingering workers, which depend on timing (``linger=False`` makes them
     reproducible too, at the cost of idle workers at the end of each generation). An env that ``reset(seed=...)``
     does not restore completely (BipedalWalker-v3 keeps its Box2D world) is reproducible only with ``linger=False``.

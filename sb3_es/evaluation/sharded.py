@@ -54,7 +54,8 @@ class ShardedEvaluator(PopulationEvaluator, ABC):
     reported as center episodes and the steps counted. So no worker idles at the end of a generation, but these
     extra steps depend on timing: with several workers, ``num_timesteps`` and the center returns are not
     reproducible to the step (the candidates' returns, the observation statistics and so the parameters are, for
-    envs whose episodes depend only on the reset seed; on BipedalWalker the lingering steps change later episodes).
+    envs whose episodes depend only on the reset seed and without a scheduled hyperparameter, which follows
+    ``num_timesteps``; on BipedalWalker the lingering steps change later episodes).
     ``linger=False`` makes the step counts reproducible too, at the cost of idle workers. One share never lingers.
 
     Callbacks: remote steps cannot call the driver's callbacks, so when the results are back the step hook is
