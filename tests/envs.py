@@ -187,6 +187,21 @@ if NEVER_ENDING_ID not in gym.registry:
     gym.register(NEVER_ENDING_ID, entry_point=NeverEndingEnv)
 
 
+#: Channels-last images (SB3 wraps them in ``VecTransposeImage``), episodes of 100 steps (:class:`SpaceEnv`).
+IMAGE_ID = "sb3es_tests/Image-v0"
+if IMAGE_ID not in gym.registry:
+    gym.register(
+        IMAGE_ID,
+        entry_point=SpaceEnv,
+        kwargs=dict(
+            observation_space=spaces.Box(0, 255, (6, 6, 3), np.uint8),
+            action_space=spaces.Box(-1, 1, (1,)),
+            max_steps=100,
+        ),
+        max_episode_steps=100,
+    )
+
+
 class SuccessInfoWrapper(gym.Wrapper):
     """Adds ``info["is_success"]`` at the end of each episode: True when the episode terminated (not truncated)."""
 

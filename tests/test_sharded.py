@@ -3,6 +3,7 @@ replayed, dead workers replaced, errors and interrupts handled."""
 
 from __future__ import annotations
 
+import functools
 import logging
 import os
 import signal
@@ -14,7 +15,8 @@ from typing import Any
 import numpy as np
 import pytest
 from algorithms import progress_bar_after_learn
-from envs import CrashingToyEnv, NeverEndingEnv, StepCounter, ToyEnv
+from envs import IMAGE_ID, CrashingToyEnv, NeverEndingEnv, SpaceEnv, StepCounter, ToyEnv
+from gymnasium import spaces
 from sharded_helpers import (
     ENVS_PER_WORKER,
     ReplayCounter,
@@ -27,6 +29,7 @@ from sharded_helpers import (
 )
 from stable_baselines3.common.callbacks import BaseCallback, CheckpointCallback
 from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.vec_env import VecTransposeImage
 
 from sb3_es.common.policies import MlpPolicy
 from sb3_es.evaluation import VecEnvEvaluator
@@ -233,6 +236,28 @@ def test_episodes_without_time_limit_are_cut_in_the_workers(host: str) -> None:
     # Every candidate's episode ended at the cap, in a worker, and the replay showed its done.
     assert model.ep_info_buffer is not None and {info["l"] for info in model.ep_info_buffer} == {15}
     assert counter.dones >= 6
+
+
+IMAGE_ENV = functools.partial(SpaceEnv, spaces.Box(0, 255, (6, 6, 3), np.uint8), spaces.Box(-1, 1, (1,)), 100)
+
+
+def test_image_observations_are_transposed_as_sb3_does(host: str) -> None:
+    """SB3 wraps a model env of channels-last images in VecTransposeImage: the workers do the same, and common seeds
+    and the episode cap work through it, with the local engine's results."""
+    kwargs: dict[str, Any] = dict(common_seeds=True, max_episode_steps=7, n_eval_episodes=2)
+    local = make_ars(make_vec_env(IMAGE_ENV, n_envs=ENVS_PER_WORKER), **kwargs)
+    assert isinstance(local.env, VecTransposeImage)
+    learn_generations(local, 2)
+    with make_evaluator(host, IMAGE_ENV, num_workers=1, envs_per_worker=ENVS_PER_WORKER) as evaluator:
+        remote = make_ars(make_vec_env(IMAGE_ENV, n_envs=1), evaluator=evaluator, **kwargs)
+        learn_generations(remote, 2)
+    np.testing.assert_array_equal(remote.strategy.center, local.strategy.center)
+    assert remote.ep_info_buffer is not None and {info["l"] for info in remote.ep_info_buffer} == {7}
+    if host == "processes":  # by name, the workers rebuild the model's VecEnv (its VecTransposeImage was SB3's)
+        by_name = make_ars(make_vec_env(IMAGE_ID, n_envs=ENVS_PER_WORKER), evaluator=host, **kwargs)
+        learn_generations(by_name, 2)
+        by_name._evaluator.close()
+        assert by_name.ep_info_buffer is not None and {info["l"] for info in by_name.ep_info_buffer} == {7}
 
 
 def test_reset_seeds_same_episodes_as_local(host: str) -> None:

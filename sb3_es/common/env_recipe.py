@@ -16,9 +16,9 @@ from typing import Any
 
 import gymnasium as gym
 from gymnasium.envs.registration import EnvSpec, WrapperSpec, load_env_creator
-from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
+from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper, VecTransposeImage
 
-from sb3_es.evaluation.worker import WorkerEnvArgs
+from sb3_es.evaluation.worker import WorkerEnvArgs, with_sb3_wrappers
 
 _MONITOR = "stable_baselines3.common.monitor:Monitor"
 
@@ -89,6 +89,8 @@ def env_recipe(env: VecEnv, evaluator: str) -> tuple[functools.partial[gym.Env],
         f"RayEvaluator(env_factory) built with a factory for your envs (evaluator={evaluator!r} builds every "
         f"worker's envs itself)"
     )
+    if isinstance(env, VecTransposeImage) and isinstance(with_sb3_wrappers(env.venv), VecTransposeImage):
+        env = env.venv  # added by SB3 to the model's env: the workers add it to theirs
     if isinstance(env, VecEnvWrapper):
         raise ValueError(
             f"evaluator={evaluator!r}: the env is wrapped in {type(env).__name__}, which the workers cannot apply "

@@ -5,16 +5,17 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
+from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper, VecTransposeImage
 
 
 def can_reset_slots(env: VecEnv) -> bool:
     """
     :param env: A VecEnv.
     :return: Whether its slots can be reset one at a time (``env_method("reset")``): not through a
-        ``VecEnvWrapper`` (a ``VecNormalize`` or ``VecFrameStack`` would not see the reset).
+        ``VecEnvWrapper`` (a ``VecNormalize`` or ``VecFrameStack`` would not see the reset), except SB3's
+        ``VecTransposeImage``, which keeps no state (the first observation is transposed here).
     """
-    return not isinstance(env, VecEnvWrapper)
+    return not isinstance(env.venv if isinstance(env, VecTransposeImage) else env, VecEnvWrapper)
 
 
 def check_common_seeds(env: VecEnv) -> None:
@@ -44,6 +45,8 @@ def reset_slot(env: VecEnv, slot: int, obs: np.ndarray | dict[str, np.ndarray], 
     """
     kwargs = {} if seed is None else {"seed": int(seed)}
     first_obs, _ = env.env_method("reset", indices=[slot], **kwargs)[0]
+    if isinstance(env, VecTransposeImage):
+        first_obs = env.transpose_observations(first_obs)
     previous: Any
     if isinstance(obs, dict):
         previous = {key: np.array(value[slot]) for key, value in obs.items()}

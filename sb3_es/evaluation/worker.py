@@ -17,6 +17,7 @@ from typing import Any, TypedDict
 import cloudpickle
 import gymnasium as gym
 import numpy as np
+from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv
 from typing_extensions import Unpack
@@ -117,6 +118,15 @@ def env_config(
     return config
 
 
+def with_sb3_wrappers(env: VecEnv) -> VecEnv:
+    """
+    :param env: A worker's VecEnv.
+    :return: ``env`` in the VecEnv wrappers SB3 adds to a model's env (``VecTransposeImage`` for channels-last
+        images), so that the workers' observations are those the policy was built for.
+    """
+    return BaseAlgorithm._wrap_env(env, monitor_wrapper=False)
+
+
 class ShareRunner:
     """
     A worker's VecEnv and engine, and the noise tables it was given.
@@ -127,7 +137,7 @@ class ShareRunner:
     def __init__(self, config: dict[str, Any]) -> None:
         config = dict(config)
         env = config.pop("env")
-        self.env: VecEnv = make_vec_env(make_env_fn(env), **config)
+        self.env: VecEnv = with_sb3_wrappers(make_vec_env(make_env_fn(env), **config))
         self.engine = VecEnvEvaluator(self.env)
         self.noise_tables: dict[tuple[int, int], np.ndarray] = {}
         self._clock_start: float | None = None
