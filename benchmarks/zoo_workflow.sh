@@ -71,7 +71,7 @@ echo "sb3-es keys: $KEYS"
 zoo() { nice -n 19 "$PY" -m sb3_es.zoo "$@"; }
 small() {  # -params that keep one generation (update) small on Pendulum-v1: 800 env steps (REINFORCE: 400)
     case "$1" in
-        ars_es) echo "n_delta:2" ;;
+        ars_es) echo "n_delta:2 n_top:2" ;;  # n_top: the Pendulum-v1 entry's (4) is above n_delta 2
         reinforce) echo "n_episodes:2" ;;
         *) echo "population_size:4" ;;
     esac

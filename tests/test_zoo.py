@@ -8,6 +8,7 @@ import json
 import os
 import pickle
 import re
+import shlex
 import shutil
 import subprocess
 import sys
@@ -91,9 +92,10 @@ REMOVED = {
 #: Test-only rl-zoo config files (one per key, a Pendulum-v1 entry with small generations) for the workflow tests:
 #: they check the zoo commands, whatever the shipped entries' values.
 TEST_CONFIGS = ROOT / "tests" / "data" / "zoo"
-#: Constructor arguments that keep a generation (an update) of each algorithm small.
+#: Constructor arguments that keep a generation (an update) of each algorithm small: benchmarks/zoo_workflow.sh's
+#: ``small`` (test_workflow_small_params_fit_the_entries_it_trains checks both).
 SMALL = {
-    "ars_es": {"n_delta": 2},
+    "ars_es": {"n_delta": 2, "n_top": 2},
     "openes": {"population_size": 4},
     "cmaes": {"population_size": 4},
     "pgpe": {"population_size": 4},
@@ -232,7 +234,7 @@ def test_plot_from_file_with_a_single_run_is_refused_with_the_fix(tmp_path: Path
     # "min() arg is an empty sequence"
     results = {"results_table": {}, "Pendulum-v1": {"ARS_ES-logs": {"last_evals": np.float64(-1600.0)}}}
     (tmp_path / "all_plots.pkl").write_bytes(pickle.dumps(results))
-    with pytest.raises(UsageError, match=r"ARS_ES-logs has a single run, and plot_from_file needs two runs"):
+    with pytest.raises(UsageError, match=r"ARS_ES-logs has a single run on Pendulum-v1, and plot_from_file needs two"):
         prepare_args("plot_from_file", ["-i", str(tmp_path / "all_plots"), "--rliable"])
     results["HalfCheetah-v5"] = {"ARS_ES-logs": {"last_evals": np.array([3000.0, 3100.0])}}  # two runs on one env
     (tmp_path / "all_plots.pkl").write_bytes(pickle.dumps(results))
@@ -240,6 +242,127 @@ def test_plot_from_file_with_a_single_run_is_refused_with_the_fix(tmp_path: Path
         "-i",
         str(tmp_path / "all_plots.pkl"),
     ]
+
+
+def test_plot_from_file_checks_only_what_rl_zoo_plots(tmp_path: Path) -> None:
+    # rl-zoo plots the keys of the first env less --skip-keys (only --keep-keys), the envs less --skip-envs (only
+    # --keep-envs), with --merge files merged in: a single-run algorithm left out of those is no failure
+    one, two = {"last_evals": np.float64(-1600.0)}, {"last_evals": np.array([-900.0, -950.0])}
+    results = {"results_table": {}, "Pendulum-v1": {"ARS_ES-logs": two, "PPO-logs": two, "REINFORCE-logs": one}}
+    results["CartPole-v1"] = {"ARS_ES-logs": one, "PPO-logs": one, "REINFORCE-logs": one}
+    (tmp_path / "ap.pkl").write_bytes(pickle.dumps(results))
+    for given in (
+        ["--skip-keys", "REINFORCE-logs"],
+        ["--skip-k=REINFORCE-logs"],  # argparse's abbreviation and = form, as rl-zoo reads them
+        ["--keep-keys", "ARS_ES-logs", "PPO-logs"],
+    ):
+        prepare_args("plot_from_file", ["-i", str(tmp_path / "ap"), *given])
+    single = r"REINFORCE-logs has a single run on Pendulum-v1, CartPole-v1, .* --skip-keys REINFORCE-logs"
+    with pytest.raises(UsageError, match=single):
+        prepare_args("plot_from_file", ["-i", str(tmp_path / "ap")])
+    with pytest.raises(UsageError, match=r"ARS_ES-logs has a single run on CartPole-v1, and"):
+        prepare_args(
+            "plot_from_file", ["-i", str(tmp_path / "ap"), "--skip-keys", "REINFORCE-logs", "-skip", "Pendulum-v1"]
+        )
+    with pytest.raises(UsageError, match=r"--keep-envs Acrobot-v1 leaves no env to plot \(the file's envs: Pendulum"):
+        prepare_args("plot_from_file", ["-i", str(tmp_path / "ap"), "--keep-envs", "Acrobot-v1"])
+    # a merged file brings REINFORCE's second run on Pendulum-v1
+    merged = {"results_table": {}, "Pendulum-v1": {"REINFORCE-logs": two}}
+    (tmp_path / "more.pkl").write_bytes(pickle.dumps(merged))
+    prepare_args("plot_from_file", ["-i", str(tmp_path / "ap.pkl"), "--merge", str(tmp_path / "more.pkl")])
+
+
+def optuna_study(algo: str, storage_name: str, study_name: str, n_trials: int) -> list[dict[str, Any]]:
+    """
+    A study of ``n_trials`` finished trials with ``algo``'s sampler, in ``storage_name`` opened as rl-zoo opens it (a
+    ``.log`` file as a JournalStorage, else a database URL).
+
+    :return: Each trial's sampled keyword arguments.
+    """
+    storage: Any = storage_name
+    if storage_name.endswith(".log"):
+        storage = optuna.storages.JournalStorage(optuna.storages.journal.JournalFileBackend(storage_name))
+    study = optuna.create_study(storage=storage, study_name=study_name, sampler=optuna.samplers.RandomSampler(seed=0))
+    sampled = []
+    for _ in range(n_trials):
+        trial = study.ask()
+        sampled.append(SAMPLERS[algo](trial, 0, 1, {}))
+        study.tell(trial, 1.0)
+    return sampled
+
+
+@pytest.mark.parametrize("storage", ["sqlite:///study.db", "study.log"])
+def test_trial_id_0_prints_a_command_that_prints_its_params(
+    storage: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # rl-zoo reads --trial-id 0 as no trial; the refusal's command prints trial 0's keyword arguments as -params,
+    # with this interpreter, from a database URL or a .log journal file (rl-zoo's two kinds of --storage)
+    monkeypatch.chdir(tmp_path)
+    (sampled, _) = optuna_study("cmaes", storage, "s", 2)
+    train = ["--algo", "cmaes", "--env", "CartPole-v1", "--storage", storage, "--study-name", "s", "--trial-id", "0"]
+    with pytest.raises(UsageError, match="--trial-id 0: rl-zoo reads a trial id of 0 as no trial") as refused:
+        prepare_args("train", train)
+    message = str(refused.value)
+    command = shlex.split(message[message.rindex(" ", 0, message.index(" -c ")) + 1 :])
+    printed = shlex.split(run(command[1:3], tmp_path).stdout)
+    assert command[0] == sys.executable and len(command) == 3  # the interpreter that runs sb3_es.zoo
+    # trial 0's values as rl-zoo's --trial-id would load them (ExperimentManager.load_trial), the sampler's
+    assert printed[0] == "-params" and eval_params(printed[1:]) == sampled
+    assert manager("cmaes", "CartPole-v1", tmp_path).load_trial(storage, "s", 0) == sampled
+    assert "--conf-file" in prepare_args("train", [*train[:4], *printed])  # -params takes them
+
+
+def eval_params(items: list[str]) -> dict[str, Any]:
+    """:return: ``-params key:value ...`` as rl-zoo's ``StoreDict`` reads them."""
+    return {key: eval(value) for key, _, value in (item.partition(":") for item in items)}
+
+
+@pytest.mark.parametrize("spelling", ["-params=", "--hyperparams=", "--hyperparams", "--hyper", "-param", "-params"])
+def test_every_spelling_of_params_is_checked(spelling: str, capsys: pytest.CaptureFixture[str]) -> None:
+    # rl-zoo's argparse takes -params=k:v and abbreviations: each is checked and shown in the default entry's line
+    def params(item: str) -> list[str]:
+        return [spelling + item] if spelling.endswith("=") else [spelling, item]
+
+    train = ["--algo", "openes", "--env", "CartPole-v1", "-n", "400"]
+    with pytest.raises(UsageError, match=r"sigmaa is not a hyperparameter of OpenES"):
+        prepare_args("train", [*train, *params("sigmaa:0.1")])
+    prepare_args("train", [*train, *params("population_size:6")])
+    out = capsys.readouterr().out
+    assert "trains with its 'default' entry (n_timesteps=400, " in out and "population_size=6," in out
+
+
+def test_trial_id_line_shows_the_values_rl_zoo_trains_with(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    url = f"sqlite:///{tmp_path / 'study.db'}"
+    optuna_study("openes", url, "s", 2)
+    train = ["--algo", "openes", "--env", "CartPole-v1", "--storage", url, "--study-name", "s", "--trial-id", "1"]
+    for params in ([], ["-params", "population_size:6"]):
+        prepare_args("train", [*train, *params])
+        out = capsys.readouterr().out
+        (line,) = [line for line in out.splitlines() if "trains with its 'default' entry" in line]
+        assert "with trial 1's values, -params and -n applied" in line
+        # rl-zoo's own reading: the entry, the trial's values over it, -params over both
+        zoo_manager = manager(
+            "openes",
+            "CartPole-v1",
+            tmp_path,
+            storage=url,
+            study_name="s",
+            trial_id=1,
+            hyperparams=eval_params(params[1:]),
+        )
+        hyperparams = zoo_manager.read_hyperparameters()[0]
+        capsys.readouterr()
+        shown = dict(item.split("=", 1) for item in line.split("(", 1)[1].split(", with trial")[0].split(", "))
+        assert shown == {k: str(v) for k, v in hyperparams.items()}
+    assert "population_size=6" in line
+    with pytest.raises(UsageError, match=r"--trial-id 5: cannot load that trial of study 's' .*IndexError"):
+        prepare_args("train", [*train[:-1], "5"])
+    # a storage file not there yet is not created (opening it would): the line says what the trial replaces
+    missing = f"sqlite:///{tmp_path / 'none.db'}"
+    prepare_args("train", [*train[:4], "--storage", missing, *train[6:]])
+    out = capsys.readouterr().out
+    assert "-params and -n applied; trial 1's values replace those it sets)" in out
+    assert not (tmp_path / "none.db").exists()
 
 
 @pytest.mark.parametrize("command", ["train", "enjoy", "record_video", "push_to_hub", "load_from_hub"])
@@ -849,6 +972,29 @@ def test_docs_walk_through_the_workflow() -> None:
     # which curve to hold against PPO
     assert "`rollout/ep_rew_mean` averages the perturbed candidates" in guide
     assert "`eval/mean_reward`" in guide
+
+
+def test_workflow_small_params_fit_the_entries_it_trains(tmp_path: Path) -> None:
+    """benchmarks/zoo_workflow.sh trains every key on Pendulum-v1 with ``-params $(small KEY)``: with the packaged
+    entry it uses (every ars_es entry, should Pendulum-v1's change), those values build a model (``n_top`` at most
+    ``n_delta``, a population that fits ``n_envs``, ...)."""
+    script = (ROOT / "benchmarks" / "zoo_workflow.sh").read_text()
+    body = script.split("small() {")[1].split("\n}\n")[0]
+    cases = dict(re.findall(r'^\s*([\w*]+)\) echo "([^"]*)" ;;', body, re.MULTILINE))
+    for key in KEYS:
+        params = cases.get(key, cases["*"])
+        assert eval_params(params.split()) == SMALL[key], key
+        data = yaml.safe_load(default_conf_file(key).read_text())
+        entries = list(data) if key == "ars_es" else ["Pendulum-v1" if "Pendulum-v1" in data else "default"]
+        for entry in entries:
+            conf = tmp_path / f"{key}.yml"
+            values = {k: v for k, v in data[entry].items() if k != "max_episode_steps"}  # the entry's env's episodes
+            conf.write_text(yaml.safe_dump({"Pendulum-v1": values}))
+            zoo_manager = manager(key, "Pendulum-v1", tmp_path, config=str(conf), hyperparams=dict(SMALL[key]))
+            result = zoo_manager.setup_experiment()
+            assert result is not None, (key, entry)
+            result[0].get_env().close()  # type: ignore[union-attr]
+    assert f"`{cases['ars_es']}` for `ars_es`" in (ROOT / "docs" / "guide" / "zoo.md").read_text()  # its $SMALL
 
 
 #: ``(algorithm, hyperparameter)``: every value that takes a schedule (rl-zoo converts ``lin_X`` for

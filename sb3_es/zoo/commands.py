@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import importlib
 import inspect
-import itertools
 import os
 import pickle
+import re
 import runpy
 import shlex
 import shutil
@@ -16,7 +17,8 @@ import tempfile
 import warnings
 from collections.abc import Iterator, Sequence
 from pathlib import Path
-from typing import Any
+from types import SimpleNamespace
+from typing import Any, cast
 
 import numpy as np
 
@@ -106,21 +108,104 @@ def _spells(flag: str, names: Sequence[str]) -> bool:
     return flag.startswith("-") and len(flag) > 2 and any(len(n) > 2 and n.startswith(flag) for n in names)
 
 
-def _hyperparam_overrides(args: Sequence[str]) -> dict[str, str]:
-    """
-    The ``-params key:value ...`` of an argument list, unevaluated (the last ``-params`` wins, as in rl-zoo).
+class _Parsed(Exception):
+    """Stops an rl-zoo script at its ``parse_args``, carrying what it parsed."""
 
-    :param args: Command-line arguments.
-    :return: ``key -> value`` as written.
+    def __init__(self, namespace: argparse.Namespace) -> None:
+        super().__init__("parsed")
+        self.namespace = namespace
+
+
+def zoo_arguments(command: str, args: Sequence[str]) -> argparse.Namespace:
     """
-    overrides: dict[str, str] = {}
-    for i, arg in enumerate(args):
-        if _spells(arg, ("-params", "--hyperparams")):
-            overrides = {}
-            for item in itertools.takewhile(lambda a: not a.startswith("-"), args[i + 1 :]):
-                key, _, value = item.partition(":")
-                overrides[key] = value
-    return overrides
+    rl-zoo's own reading of a command line: the script of ``command`` runs until its ``parse_args`` (it only builds
+    its parser before that), which returns here instead of going on. Every spelling that rl-zoo accepts is read as
+    rl-zoo reads it (``-params=k:v``, abbreviations such as ``--hyper``, the last of a repeated option).
+
+    :param command: A key of :data:`SCRIPTS` whose script is a function (``train``, ``plot_from_file``, ...).
+    :param args: rl-zoo arguments (after the command).
+    :return: The parsed arguments (``-params`` evaluated by rl-zoo's ``StoreDict``).
+    """
+    module, _, function = SCRIPTS[command].partition(":")
+    if not function:
+        raise ValueError(f"rl-zoo's {command} is a module, not a function: its arguments cannot be read first.")
+    register()  # the sb3-es keys are --algo choices
+    script = getattr(importlib.import_module(module), function)
+    parse_args = argparse.ArgumentParser.parse_args
+
+    def parse_and_stop(parser: argparse.ArgumentParser, *a: Any, **k: Any) -> argparse.Namespace:
+        raise _Parsed(parse_args(parser, *a, **k))
+
+    setattr(argparse.ArgumentParser, "parse_args", parse_and_stop)  # noqa: B010 (mypy refuses assigning a method)
+    try:
+        with _argv([f"sb3_es.zoo {command}", *args]):
+            script()
+    except _Parsed as parsed:
+        return parsed.namespace
+    finally:
+        setattr(argparse.ArgumentParser, "parse_args", parse_args)  # noqa: B010 (the original method back)
+    raise RuntimeError(f"{SCRIPTS[command]} returned without parsing its arguments.")
+
+
+def trial_hyperparams(algo: str, storage: str, study_name: str, trial_id: int) -> dict[str, Any]:
+    """
+    A trial's keyword arguments as rl-zoo's ``--trial-id`` loads them: rl-zoo's ``ExperimentManager.load_trial``
+    (a ``.log`` file as a JournalStorage, anything else as a database URL; the key's converter applied).
+
+    :param algo: rl-zoo key of the study's algorithm.
+    :param storage: ``--storage``.
+    :param study_name: ``--study-name``.
+    :param trial_id: Index of the trial in the study.
+    :return: ``keyword -> value``.
+    """
+    from rl_zoo3.exp_manager import ExperimentManager
+
+    register()  # the sb3-es converters
+    loader = cast(ExperimentManager, SimpleNamespace(algo=algo))  # load_trial reads nothing else of the manager
+    return ExperimentManager.load_trial(loader, storage, study_name, trial_id)
+
+
+def _stored_trial(algo: str, storage: str, study_name: str, trial_id: int) -> dict[str, Any]:
+    """
+    :return: :func:`trial_hyperparams`, or ``{}`` when ``storage`` is a file (SQLite URL, ``.log``) not yet there:
+        opening it would create it (rl-zoo then fails on the missing study, naming it).
+    """
+    path = storage.removeprefix("sqlite:///") if storage.startswith("sqlite:///") or storage.endswith(".log") else ""
+    if path and not Path(path).is_file():
+        return {}
+    try:
+        return trial_hyperparams(algo, storage, study_name, trial_id)
+    except (KeyError, IndexError, ValueError) as e:
+        raise UsageError(
+            f"--trial-id {trial_id}: cannot load that trial of study {study_name!r} from --storage {storage} "
+            f"({type(e).__name__}: {e}). Check the study name, the storage and the trial number (the study's trials "
+            "are numbered from 0)."
+        ) from e
+
+
+def trial_params_command(algo: str, storage: str, study_name: str, trial_id: int) -> str:
+    """
+    A shell command that prints a trial's keyword arguments as ``-params key:value ...``: this interpreter runs
+    what rl-zoo's ``ExperimentManager.load_trial`` does (a ``.log`` file opened as a JournalStorage, anything else
+    as a database URL; the key's converter applied to the stored values).
+
+    :param algo: rl-zoo key of the study's algorithm.
+    :param storage: ``--storage``.
+    :param study_name: ``--study-name``.
+    :param trial_id: Index of the trial in the study.
+    :return: The command, for a POSIX shell.
+    """
+    opened = repr(storage)
+    if storage.endswith(".log"):
+        opened = f"optuna.storages.JournalStorage(optuna.storages.journal.JournalFileBackend({storage!r}))"
+    code = (
+        "import optuna, shlex; from sb3_es.zoo.hyperparams_opt import CONVERTERS; "
+        f"kwargs = CONVERTERS[{algo!r}](optuna.load_study(study_name={study_name!r}, storage={opened})"
+        f".trials[{int(trial_id)}].params); "
+        "print(shlex.join(['-params', *(f'{k}:{v!r}' for k, v in kwargs.items())]))"
+    )
+    quoted = re.sub(r'([\\"$`])', r"\\\1", code)  # in double quotes: the code's own quotes stay readable
+    return f'{shlex.quote(sys.executable)} -c "{quoted}"'
 
 
 #: The keys whose string values rl-zoo reads as a schedule ``"lin_X"`` (it splits them at ``_``).
@@ -187,27 +272,59 @@ def check_entry_names(conf: str, key: str | None, algo: str, names: Sequence[str
         )
 
 
-def check_plot_runs(results_file: str) -> None:
-    """
-    Refuse an ``all_plots`` results file in which an algorithm has a single run on every env: rl-zoo's
-    ``plot_from_file`` skips it, then fails with "min() arg is an empty sequence".
-
-    :param results_file: The ``.pkl`` file (``-i``), written by ``all_plots -o``.
-    """
-    path = Path(results_file if results_file.endswith(".pkl") else f"{results_file}.pkl")
+def _load_results(results_file: str) -> dict[str, Any] | None:
+    """:return: An ``all_plots -o`` pickle without its ``results_table`` (``None`` if absent: rl-zoo names it)."""
+    path = Path(results_file)
     if not path.is_file():
-        return  # rl-zoo names the missing file
+        return None
     with path.open("rb") as file:
         results = pickle.load(file)  # the user's own all_plots output, as rl-zoo reads it
-    single: dict[str, list[bool]] = {}  # algorithm -> whether each env has a single run (rl-zoo skips those)
-    for env, by_algo in results.items():
-        for algo, result in by_algo.items() if env != "results_table" else ():
-            single.setdefault(algo, []).append(np.ndim(result["last_evals"]) == 0)  # one run: its mean alone
-    for algo, flags in single.items():
-        if all(flags):
+    results.pop("results_table", None)
+    return dict(results)
+
+
+def check_plot_runs(plot_args: argparse.Namespace) -> None:
+    """
+    Refuse a ``plot_from_file`` in which an algorithm it plots has a single run on every env it plots: rl-zoo skips
+    those, then fails with "min() arg is an empty sequence". The algorithms and envs are rl-zoo's (its
+    ``plot_from_file``): ``--merge`` files merged into the input's envs, the keys of its first env less
+    ``--skip-keys`` (and only ``--keep-keys`` if given), its envs less ``--skip-envs`` (only ``--keep-envs``).
+
+    :param plot_args: ``plot_from_file``'s arguments, as rl-zoo parses them (:func:`zoo_arguments`).
+    """
+    name = plot_args.input or ""
+    name = name if name.endswith(".pkl") else f"{name}.pkl"  # as rl-zoo reads -i
+    results = _load_results(name)
+    if not results:
+        return  # rl-zoo names the missing file
+    for merged_name in plot_args.merge:
+        merged = _load_results(merged_name)
+        if merged is None:
+            return
+        for env, by_algo in results.items():
+            by_algo.update(merged.get(env, {}))
+    keys = [key for key in next(iter(results.values())) if key not in plot_args.skip_keys]
+    if plot_args.keep_keys:
+        keys = [key for key in keys if key in plot_args.keep_keys]
+    envs = [env for env in results if env not in plot_args.skip_envs]
+    if plot_args.keep_envs:
+        envs = [env for env in envs if env in plot_args.keep_envs]
+    if keys and not envs:
+        given = (("--skip-envs", plot_args.skip_envs), ("--keep-envs", plot_args.keep_envs))
+        filters = " ".join(f"{flag} {' '.join(values)}" for flag, values in given if values)
+        raise UsageError(
+            f"{name}: {filters} leaves no env to plot (the file's envs: {', '.join(results)}), and rl-zoo would fail "
+            "with 'min() arg is an empty sequence': keep at least one of them."
+        )
+    for key in keys:
+        if any(key not in results[env] for env in envs):
+            continue  # rl-zoo's KeyError names it
+        # one run: all_plots stores its mean alone, a number, and rl-zoo skips that env for the key
+        if all(np.ndim(results[env][key]["last_evals"]) == 0 for env in envs):
             raise UsageError(
-                f"{path}: {algo} has a single run, and plot_from_file needs two runs (seeds) or more per algorithm. "
-                "Train more seeds (train --seed S, or compare.py --seeds), then run all_plots again."
+                f"{name}: {key} has a single run on {', '.join(envs)}, and plot_from_file needs two runs (seeds) or "
+                f"more per algorithm. Train more seeds (train --seed S, or compare.py --seeds), then run all_plots "
+                f"again; or leave {key} out with --skip-keys {key}."
             )
 
 
@@ -225,7 +342,7 @@ def prepare_args(command: str, args: Sequence[str]) -> list[str]:
     """
     args = list(args)
     if command == "plot_from_file":
-        check_plot_runs(_option_value(args, ("-i", "--input"), ""))
+        check_plot_runs(zoo_arguments(command, args))
     if command not in ALGO_COMMANDS:
         return args
     algo = _option_value(args, ("--algo",), "ppo")
@@ -233,33 +350,30 @@ def prepare_args(command: str, args: Sequence[str]) -> list[str]:
     if not is_sb3_es_algo(algo):
         return args
     if command == "train":
-        trial_id = _option_value(args, ("--trial-id",), "")
-        storage = _option_value(args, ("--storage",), "")
-        study = _option_value(args, ("--study-name",), "")
-        # rl-zoo's CSV and "Best trial" print the study's stored names (population_size_pow, ...): the keyword
-        # arguments are the key's converter applied to them.
-        convert = (
-            'python -c "import optuna; from sb3_es.zoo.hyperparams_opt import CONVERTERS; '
-            f"print(CONVERTERS['{algo}'](optuna.load_study(study_name='{study or 'STUDY'}', "
-            f"storage='{storage or 'STORAGE'}').trials[0].params))\""
-        )
-        if trial_id and parse_number(trial_id) == 0:
+        train_args = zoo_arguments(command, args)
+        trial_id: int | None = train_args.trial_id
+        storage, study = train_args.storage, train_args.study_name
+        if trial_id == 0:
+            convert = trial_params_command(algo, storage or "STORAGE", study or "STUDY", 0)
             raise UsageError(
-                f"--trial-id {trial_id}: rl-zoo reads a trial id of 0 as no trial and would train with the file's "
-                "values. Pass trial 0's keyword arguments with -params key:value instead; they are printed by "
-                f"{convert} (an SQLite storage as sqlite:///file.db; rl-zoo opens a .log file as a JournalStorage)."
+                f"--trial-id {_option_value(args, ('--trial-id',), '0')}: rl-zoo reads a trial id of 0 as no trial and "
+                "would train with the file's values. Pass trial 0's keyword arguments with -params key:value instead; "
+                f"this command prints them: {convert}"
             )
-        if trial_id and not (storage and study):
+        if trial_id is not None and not (storage and study):
             raise UsageError(
                 f"--trial-id {trial_id} needs --storage and --study-name: without both, rl-zoo loads no trial and "
                 "would train with the file's values."
             )
-        if not _has_option(args, "-conf", "--conf-file"):
-            args += ["--conf-file", str(default_conf_file(algo))]
-        conf = _option_value(args, ("-conf", "--conf-file"), "")
-        env_id = _option_value(args, ("--env",), "CartPole-v1")
-        if trial_id:
-            print(f"sb3-es: {algo} on {env_id}: the values of trial {trial_id} of the study replace the file's")
+        trial = _stored_trial(algo, storage, study, trial_id) if trial_id is not None else {}
+        conf: str | None = train_args.conf_file
+        if conf is None:
+            conf = str(default_conf_file(algo))
+            args += ["--conf-file", conf]
+        env_id = train_args.env
+        if trial_id is not None:
+            values = f": {', '.join(f'{k}={v}' for k, v in trial.items())}" if trial else " (and -params replaces them)"
+            print(f"sb3-es: {algo} on {env_id}: the values of trial {trial_id} of the study replace the file's{values}")
         if conf.endswith((".yml", ".yaml")) and Path(conf).is_file():
             key, entry = config_entry(conf, env_id)
             if key is None:
@@ -268,28 +382,30 @@ def prepare_args(command: str, args: Sequence[str]) -> list[str]:
                     f"{algo}: add an entry named {env_id} (or default) to it, e.g. copied from "
                     f"{default_conf_file(algo)}."
                 )
-            overrides = _hyperparam_overrides(args)
+            overrides: dict[str, Any] = train_args.hyperparams or {}
             check_entry_names(conf, key, algo, [*entry, *overrides])
-            optimizer = str({**entry, **overrides}.get("optimizer", "clipup")).strip("'\"")
-            if (
-                algo == "pgpe"
-                and optimizer != "clipup"
-                and _has_option(args, "-optimize", "--optimize-hyperparameters")
-            ):
+            used = {**entry, **trial, **overrides}  # rl-zoo's order (ExperimentManager.read_hyperparameters)
+            optimizer = str(used.get("optimizer", "clipup")).strip("'\"")
+            if algo == "pgpe" and optimizer != "clipup" and train_args.optimize_hyperparameters:
                 raise UsageError(
                     f"-optimize samples PGPE's ClipUp max_speed, which optimizer={optimizer!r} does not take: every "
                     "trial would be refused. Search with ClipUp (leave optimizer out of the entry and -params), then "
                     "tune the other optimizer by hand."
                 )
-            check_schedule_strings(conf, key, {k: v for k, v in entry.items() if k not in overrides})
+            check_schedule_strings(conf, key, {k: v for k, v in entry.items() if k not in {**trial, **overrides}})
             if key == "default":
-                used = {**entry, **overrides}
-                n_timesteps = _option_value(args, ("-n", "--n-timesteps"), "")
-                if n_timesteps.isdigit() and int(n_timesteps) > 0:  # rl-zoo's -n replaces the entry's n_timesteps
-                    used["n_timesteps"] = int(n_timesteps)
+                if train_args.n_timesteps > 0:  # rl-zoo's -n replaces the entry's n_timesteps
+                    used["n_timesteps"] = train_args.n_timesteps
+                applied = "with -params and -n applied"
+                if trial_id is not None:
+                    applied = (
+                        f"with trial {trial_id}'s values, -params and -n applied"
+                        if trial
+                        else f"with -params and -n applied; trial {trial_id}'s values replace those it sets"
+                    )
                 print(
                     f"sb3-es: {conf} has no {env_id} entry: {algo} trains with its 'default' entry "
-                    f"({', '.join(f'{k}={v}' for k, v in used.items())}, with -params and -n applied), not tuned for "
+                    f"({', '.join(f'{k}={v}' for k, v in used.items())}, {applied}), not tuned for "
                     f"{env_id}. Add an entry for {env_id} to a copy of the file (--conf-file) or override values "
                     "with -params key:value."
                 )
