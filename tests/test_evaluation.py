@@ -2,16 +2,18 @@
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 import pytest
-from envs import StepCounter, ToyEnv, rollout
+from envs import IMAGE_ID, StepCounter, ToyEnv, rollout
 from stable_baselines3.common.env_util import make_vec_env
-from stable_baselines3.common.monitor import Monitor
-from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNormalize
+from stable_baselines3.common.monitor import Monitor, load_results
+from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNormalize, VecTransposeImage
 
+from sb3_es import ARS
 from sb3_es.common.policies import FlatPolicy, LinearPolicy, MlpPolicy
 from sb3_es.evaluation import Generation, PopulationResult, VecEnvEvaluator
 
@@ -227,3 +229,30 @@ def test_vec_normalize_wrapper(norm_reward: bool) -> None:
     assert env.obs_rms.count > 400
     # Raw Pendulum observations have an angular-velocity variance of about 34, normalized ones about 1.
     assert np.all(result.obs_stats.var < 3.0)
+
+
+def test_episodes_cut_through_vec_transpose_image_reach_the_monitor(tmp_path: Path) -> None:
+    """SB3 puts channels-last images in VecTransposeImage: a cut episode still ends in its slot's Monitor."""
+    env = make_vec_env(IMAGE_ID, n_envs=2, monitor_dir=str(tmp_path))
+    model = ARS("LinearPolicy", env, n_delta=2, max_episode_steps=7, seed=0)
+    assert isinstance(model.env, VecTransposeImage)
+    model.learn(50)
+    env.close()
+    episodes = load_results(str(tmp_path))
+    assert len(episodes) >= 4 and (episodes["l"] == 7).all()
+
+
+def test_episodes_cut_in_another_process_are_said_to_miss_the_monitor(tmp_path: Path) -> None:
+    """A SubprocVecEnv's Monitors run in its processes, where a cut episode cannot be ended: a warning says so."""
+    env = make_vec_env(
+        "Pendulum-v1",
+        n_envs=2,
+        monitor_dir=str(tmp_path),
+        vec_env_cls=SubprocVecEnv,
+        vec_env_kwargs=dict(start_method="fork"),
+    )
+    model = ARS("LinearPolicy", env, n_delta=1, max_episode_steps=30, seed=0)
+    with pytest.warns(UserWarning, match=r"cut at max_episode_steps=30 .* runs in another process \(SubprocVecEnv\)"):
+        model.learn(60)
+    env.close()
+    assert model.ep_info_buffer is not None and {info["l"] for info in model.ep_info_buffer} == {30}

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+import warnings
 from typing import Any
 
 import numpy as np
@@ -75,13 +76,27 @@ def end_capped_episodes(
         monitor = _slot_monitor(env, slot)
         if monitor is not None and not monitor.needs_reset:
             infos[slot]["episode"] = _end_monitor_episode(monitor, infos[slot])
+        elif monitor is None and not isinstance(env.unwrapped, DummyVecEnv) and env.env_is_wrapped(Monitor, [slot])[0]:
+            warnings.warn(
+                f"An episode cut at max_episode_steps={max_episode_steps} by the evaluation cannot be ended in its "
+                f"Monitor, which runs in another process ({type(env.unwrapped).__name__}): the Monitor files and "
+                "get_episode_rewards() miss the cut episodes (rollout/ep_rew_mean has them). Give each env the time "
+                f"limit inside its Monitor (make_vec_env(env_id, env_kwargs=dict(max_episode_steps="
+                f"{max_episode_steps}))), or use evaluator='processes', whose workers run whole episodes.",
+                UserWarning,
+                stacklevel=2,
+            )
         infos[slot]["terminal_observation"] = reset_slot(env, slot, new_obs)
         dones[slot] = True
 
 
 def _slot_monitor(env: VecEnv, slot: int) -> Monitor | None:
-    """:return: The ``Monitor`` of a ``DummyVecEnv`` slot, if it has one (another process's cannot be reached)."""
-    return unwrap_wrapper(env.envs[slot], Monitor) if isinstance(env, DummyVecEnv) else None  # type: ignore[return-value]
+    """
+    :return: The ``Monitor`` of a ``DummyVecEnv`` slot (also through SB3's ``VecTransposeImage``), if it has one
+        (another process's cannot be reached).
+    """
+    inner = env.unwrapped
+    return unwrap_wrapper(inner.envs[slot], Monitor) if isinstance(inner, DummyVecEnv) else None  # type: ignore[return-value]
 
 
 def _end_monitor_episode(monitor: Monitor, info: dict[str, Any]) -> dict[str, Any]:
