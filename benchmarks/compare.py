@@ -63,6 +63,7 @@ import re
 import shlex
 import shutil
 import sys
+import tempfile
 import time
 import traceback
 import warnings
@@ -459,6 +460,10 @@ def run_folder(out: Path, algo: str, env_id: str, seed: int) -> Path:
     return out / "logs" / algo / f"{env_slug(env_id)}_1_seed{seed}"
 
 
+class RunRefused(ValueError):
+    """A run's input that it cannot use (a ``--continue-from`` model it cannot load): said without a traceback."""
+
+
 def run_one(
     algo: str,
     env_id: str,
@@ -509,53 +514,64 @@ def run_one(
     if continue_from is not None:
         continue_from = continue_from.resolve()
         if not continue_from.is_file() or continue_from.suffix != ".zip":
-            raise ValueError(f"--continue-from {continue_from}: no such model; give a saved model's .zip file.")
+            raise RunRefused(f"--continue-from {continue_from}: no such model; give a saved model's .zip file.")
         if continue_from.is_relative_to(folder.resolve()):
-            raise ValueError(
+            raise RunRefused(
                 f"--continue-from {continue_from} lies in the run folder {folder}, which the new run replaces: "
                 "give another --out, or copy the model elsewhere first."
             )
-    if folder.exists():  # a new run of the same (algorithm, env, seed) replaces the old one
-        shutil.rmtree(folder)
-    args = argparse.Namespace(
-        algo=algo, env=env_id, seed=seed, n_timesteps=steps or -1, conf_file=str(config), env_kwargs=None
-    )
-    set_random_seed(seed)
-    manager = TrainingWrapperManager(
-        args,
-        algo,
-        env_id,
-        str(out / "logs"),
-        tensorboard_log=str(out / "tb"),
-        n_timesteps=steps or 0,
-        eval_freq=-1,
-        seed=seed,
-        verbose=verbose,
-        config=str(config),
-        hyperparams=dict(overrides) if overrides else None,
-        uuid_str=f"_seed{seed}",
-        trained_agent=str(continue_from or ""),
-    )
-    assert Path(manager.save_path) == folder, (manager.save_path, folder)
-    manager.train_wrapper = parse_train_wrapper(train_wrapper)
-    if overrides:
-        note += f"; overridden: {', '.join(f'{k}={v}' for k, v in overrides.items())}"
-    if train_wrapper is not None:
-        note += f"; training envs only: {train_wrapper}"
-    setup_log = io.StringIO()
+    replaced = None
+    if folder.exists():  # a new run of the same (algorithm, env, seed) replaces the old one once it is set up
+        replaced = Path(tempfile.mkdtemp(prefix=".replaced_", dir=out)) / folder.name
+        folder.rename(replaced)
     try:
-        with contextlib.redirect_stdout(setup_log if verbose == 0 else sys.stdout):
-            result = manager.setup_experiment()
-    except (TypeError, ValueError, KeyError) as e:
-        if continue_from is None:
-            raise
-        # e.g. a PPO run given an ARS model: the policy's constructor refuses PPO's arguments
-        raise ValueError(
-            f"--continue-from {continue_from}: {algo} cannot load it ({type(e).__name__}: {e}); give a model saved "
-            f"by {algo}."
-        ) from e
-    assert result is not None
-    (folder / "setup.txt").write_text(setup_log.getvalue())
+        args = argparse.Namespace(
+            algo=algo, env=env_id, seed=seed, n_timesteps=steps or -1, conf_file=str(config), env_kwargs=None
+        )
+        set_random_seed(seed)
+        manager = TrainingWrapperManager(
+            args,
+            algo,
+            env_id,
+            str(out / "logs"),
+            tensorboard_log=str(out / "tb"),
+            n_timesteps=steps or 0,
+            eval_freq=-1,
+            seed=seed,
+            verbose=verbose,
+            config=str(config),
+            hyperparams=dict(overrides) if overrides else None,
+            uuid_str=f"_seed{seed}",
+            trained_agent=str(continue_from or ""),
+        )
+        assert Path(manager.save_path) == folder, (manager.save_path, folder)
+        manager.train_wrapper = parse_train_wrapper(train_wrapper)
+        if overrides:
+            note += f"; overridden: {', '.join(f'{k}={v}' for k, v in overrides.items())}"
+        if train_wrapper is not None:
+            note += f"; training envs only: {train_wrapper}"
+        setup_log = io.StringIO()
+        try:
+            with contextlib.redirect_stdout(setup_log if verbose == 0 else sys.stdout):
+                result = manager.setup_experiment()
+        except (TypeError, ValueError, KeyError) as e:
+            if continue_from is None:
+                raise
+            # e.g. a PPO run given an ARS model: the policy's constructor refuses PPO's arguments
+            raise RunRefused(
+                f"--continue-from {continue_from}: {algo} cannot load it ({type(e).__name__}: {e}); give a model saved "
+                f"by {algo}."
+            ) from e
+        assert result is not None
+        (folder / "setup.txt").write_text(setup_log.getvalue())
+    except BaseException:
+        if replaced is not None:  # the old run is put back: nothing is lost to a run that could not start
+            shutil.rmtree(folder, ignore_errors=True)
+            replaced.rename(folder)
+            shutil.rmtree(replaced.parent)
+        raise
+    if replaced is not None:
+        shutil.rmtree(replaced.parent)
     model, hyperparams = result
     total = manager.n_timesteps
     offset = model.num_timesteps  # 0 for a new model; a continued one goes on from its saved count
@@ -892,7 +908,15 @@ def parse_overrides(items: list[str]) -> dict[str, dict[str, Any]]:
         algo, colon, key = target.partition(":")
         if not sep or not colon or not algo or not key:
             raise SystemExit(f"--override {item!r}: use ALGO:KEY=VALUE, e.g. ppo:n_steps=256")
-        overrides[algo][key] = read_value(value)
+        try:
+            overrides[algo][key] = read_value(value)
+            if isinstance(overrides[algo][key], str) and "(" in value:
+                compile(overrides[algo][key], "--override", "eval")  # rl-zoo evaluates it: "dict(...)"
+        except (yaml.YAMLError, SyntaxError) as e:
+            raise SystemExit(
+                f"--override {item!r}: {value!r} is not a value ({type(e).__name__}: {str(e).splitlines()[0]}); "
+                "write numbers, true/false, [lists] or a Python expression such as dict(net_arch=[64, 64])"
+            ) from e
     return dict(overrides)
 
 
@@ -913,7 +937,7 @@ def check_run_arguments(args: argparse.Namespace, thresholds: dict[str, float], 
         ("--eval-envs", args.eval_envs, 1),
         ("--confirm-episodes", args.confirm_episodes, 0),
     ):
-        if value is not None and value < low:
+        if value is not None and not value >= low:  # NaN too
             problems.append(f"{flag} {value}: it must be {'positive' if low > 0 else '0 or more'}")
     problems += selection_problems(args.seeds, args.envs, thresholds)
     unknown_algos = sorted(set(overrides) - set(args.algos))
@@ -1099,8 +1123,10 @@ def main(argv: list[str] | None = None) -> Path:
                     continue_from=args.continue_from,
                     train_wrapper=args.train_wrapper,
                 )
-            except Exception:
+            except Exception as e:
                 if not args.keep_going:
+                    if isinstance(e, RunRefused):
+                        raise SystemExit(f"compare.py: {e}") from e
                     raise
                 failures.append(label)
                 run_dir.mkdir(parents=True, exist_ok=True)

@@ -221,7 +221,11 @@ def main() -> None:
                 f"| {row.engine} | {row.layout} | {fmt(row.rate)} | {fmt(100 * row.rate / ceiling)} | "
                 f"{fmt(row.ms_per_gen)} | {fmt(overhead, 1)}{share} | {fmt(replay, 1)} | {fmt(imbalance, 1)} |"
             )
-        local, twin = rows[0], next(r for r in rows if r.layout == "1 worker x 2 envs")
+        twins = [r for r in rows if r.layout == "1 worker x 2 envs"]
+        if not twins:  # --envs-per-worker without 2: no Ray layout runs the local row's work
+            print("\n(The same-work comparison needs 2 in --envs-per-worker.)")
+            continue
+        local, twin = rows[0], twins[0]
         same = np.array_equal(local.model.strategy.center, twin.model.strategy.center) and local.steps == twin.steps
         diffs = 1000 * (np.array(twin.gen_times) - np.array(local.gen_times))
         verdict = "bit-identical generations" if same else "NOT identical: check the seeds"

@@ -121,10 +121,18 @@ def test_a_run_continues_from_its_last_model(tmp_path: Any) -> None:
     report = (tmp_path / "second" / "results.md").read_text()  # the run's start and end, not its end twice
     assert f"- Runs: first started {second['started']}, last ended {second['date']}" in report
 
-    with pytest.raises(ValueError, match="no such model; give a saved model's .zip file"):
+    with pytest.raises(SystemExit, match="no such model; give a saved model's .zip file"):
         main([*common, "--steps", "10", "--out", str(tmp_path / "third"), "--continue-from", str(first / "none.zip")])
-    with pytest.raises(ValueError, match="lies in the run folder .* give another --out"):
+    with pytest.raises(SystemExit, match="lies in the run folder .* give another --out"):
         main([*common, "--steps", "2000", "--out", str(tmp_path / "first"), "--continue-from", str(checkpoint)])
+    # a run that cannot load its model leaves the finished run it would replace as it was
+    before = sorted(path.name for path in first.iterdir())
+    pendulum = tmp_path / "pendulum.zip"
+    ARS("LinearPolicy", "Pendulum-v1").save(pendulum)
+    with pytest.raises(SystemExit, match=r"ars_es cannot load it \(ValueError: Observation spaces do not match"):
+        main([*common, "--steps", "10", "--out", str(tmp_path / "first"), "--continue-from", str(pendulum)])
+    assert sorted(path.name for path in first.iterdir()) == before and "summary.json" in before
+    assert [path.name for path in (tmp_path / "first").iterdir() if path.name.startswith(".")] == []
     with pytest.raises(SystemExit, match="one algorithm, env and seed"):
         main([*common[:5], "0", "1", *common[6:], "--steps", "10", "--continue-from", str(checkpoint)])
 
@@ -148,6 +156,12 @@ def test_a_run_continues_from_its_last_model(tmp_path: Any) -> None:
         (["--steps", "100", "--envs", "CartPole-v1", "Pendulum-v9"], r"--envs Pendulum-v9: Environment version"),
         (["--steps", "100", "--override", "ars_es:n_deltaa=4"], r"ars_es:n_deltaa: n_deltaa is not a hyperparameter"),
         (["--steps", "100", "--threshold", "CartPole-v1=abc"], r"use ENV_ID=VALUE with a number"),
+        (["--seconds", "nan"], r"--seconds nan: it must be positive"),
+        (["--steps", "100", "--override", "ars_es:n_delta=[1,"], r"'\[1,' is not a value \(ParserError"),
+        (
+            ["--steps", "100", "--override", "ars_es:policy_kwargs=dict(a=[8]"],
+            r"is not a value \(SyntaxError: '\(' was",
+        ),
         (
             ["--steps", "100", "--continue-from", "r/logs/ars_es/Pendulum-v1_1_seed0/last_model.zip"],
             r"was trained on Pendulum-v1, not on --envs \['CartPole-v1'\]",
