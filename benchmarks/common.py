@@ -23,6 +23,7 @@ from typing import Any
 
 import gymnasium as gym
 import yaml
+from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.utils import get_system_info
 
 import sb3_es
@@ -259,3 +260,23 @@ def measure_plain(env_id: str, n_procs: int, seconds: float, warmup: float = 1.0
         episodes=sum(out[1] for out in outs),
         seconds=max(out[2] for out in outs),
     )
+
+
+def load_model(parser: argparse.ArgumentParser, algo_class: type[BaseAlgorithm], path: str | Path) -> BaseAlgorithm:
+    """
+    A script's saved model, or the parser's error naming what is wrong (no such file, another algorithm's model).
+
+    :param parser: The script's parser.
+    :param algo_class: The algorithm that saved it.
+    :param path: The model's ``.zip`` file (the suffix may be left out, as ``load()`` allows).
+    :return: The model, on the CPU.
+    """
+    path = Path(path)
+    if not (path.is_file() or path.with_name(f"{path.name}.zip").is_file()):
+        parser.error(f"{path}: no such model; give a saved model's .zip file.")
+    try:
+        return algo_class.load(path, device="cpu")
+    except (ValueError, KeyError, TypeError) as e:
+        parser.error(
+            f"{path}: {algo_class.__name__} cannot load it ({type(e).__name__}: {e}); give the algorithm that saved it."
+        )

@@ -7,7 +7,7 @@ Examples::
     python benchmarks/headline.py --seeds 0 1 2                       # the defaults, three seeds
     python benchmarks/headline.py --seeds 0 --steps 1e6 3e6 --set reward_clip=[-1,1]   # a variation
 
-Prints one line per seed and budget, and the median at each budget; writes ``<out>/headline.json``.
+Prints one line per seed and budget, and the median at each budget; writes ``<out>/headline.json`` after every seed.
 """
 
 from __future__ import annotations
@@ -19,8 +19,10 @@ import time
 from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 import torch
+import yaml
 from common import algorithm_classes, read_value, selection_problems, source_commit, step_count, system_info
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.env_util import make_vec_env
@@ -42,7 +44,10 @@ def key_value(text: str) -> tuple[str, Any]:
     key, sep, value = text.partition("=")
     if not sep or not key:
         raise argparse.ArgumentTypeError(f"{text!r} is not KEY=VALUE; give one such as n_delta=16")
-    return key, read_value(value)
+    try:
+        return key, read_value(value)
+    except yaml.YAMLError as e:
+        raise argparse.ArgumentTypeError(f"{text!r}: {value!r} is not a YAML value ({str(e).splitlines()[0]})") from e
 
 
 def set_problems(algo: str, items: list[tuple[str, Any]]) -> list[str]:
@@ -127,27 +132,29 @@ def main(argv: list[str] | None = None) -> None:
     if args.episodes < 1:
         problems.append(f"--episodes {args.episodes}: it must be at least 1")
     problems += selection_problems(args.seeds, [args.env], {}) + set_problems(args.algo, args.set)
+    kwargs = dict(args.set)
+    if not problems:  # the env and the constructor's own checks (policy, values), before any training
+        try:
+            ALGORITHMS[args.algo](args.policy, gym.make(args.env), seed=args.seeds[0], **kwargs)
+        except (gym.error.Error, ValueError, TypeError, KeyError) as e:
+            problems.append(f"{args.algo}({args.policy!r}, {args.env!r}, ...): {str(e).rstrip('.')}")
     if problems:
         parser.error("; ".join(problems) + ".")
     torch.set_num_threads(1)
-    kwargs = dict(args.set)
     budgets = sorted(args.steps)
-    rows = [
-        row
-        for seed in args.seeds
-        for row in run(args.algo, args.policy, args.env, seed, budgets, args.episodes, kwargs)
-    ]
-    median = {}
-    for budget in budgets:
-        at = [row["mean"] for row in rows if row["budget"] == budget]
-        median[budget] = float(np.median(at))
-        print(f"{budget:,} steps: median over {len(at)} seeds {median[budget]:.1f}")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     # the sb3_es source that ran, wherever the script is run from (None outside a git checkout)
     info = {"system": system_info(), "date": time.strftime("%Y-%m-%d %H:%M %Z"), "commit": source_commit()}
-    record: dict[str, Any] = {"args": vars(args), "kwargs": kwargs, "runs": rows, "median": median, **info}
-    (out / "headline.json").write_text(json.dumps(record, indent=2, default=str))
+    rows: list[dict] = []
+    median: dict[int, float] = {}
+    for seed in args.seeds:  # written after every seed: an interrupted run keeps the seeds it finished
+        rows += run(args.algo, args.policy, args.env, seed, budgets, args.episodes, kwargs)
+        median = {b: float(np.median([r["mean"] for r in rows if r["budget"] == b])) for b in budgets}
+        record: dict[str, Any] = {"args": vars(args), "kwargs": kwargs, "runs": rows, "median": median, **info}
+        (out / "headline.json").write_text(json.dumps(record, indent=2, default=str))
+    for budget in budgets:
+        print(f"{budget:,} steps: median over {len(args.seeds)} seeds {median[budget]:.1f}")
 
 
 if __name__ == "__main__":

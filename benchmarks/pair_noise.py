@@ -22,7 +22,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 import shimmy
-from common import algorithm_classes, positive_problems, system_info
+from common import algorithm_classes, load_model, positive_problems, system_info
 from stable_baselines3.common.env_util import make_vec_env
 
 from sb3_es.common.population_algorithm import PopulationAlgorithm
@@ -65,7 +65,7 @@ def main(argv: list[str] | None = None) -> None:
     if problems:
         parser.error("; ".join(problems) + ".")
 
-    model = ALGORITHMS[args.algo].load(args.model, device="cpu")
+    model: Any = load_model(parser, ALGORITHMS[args.algo], args.model)
     strategy: Any = model.strategy  # a PGPE model's keeps the standard deviations
     center = np.asarray(strategy.center)
     sigma = np.asarray(strategy.stdev) if args.sigma is None else args.sigma

@@ -61,6 +61,7 @@ MUJOCO_GL = choose_mujoco_gl()
 import gymnasium as gym  # noqa: E402
 import numpy as np  # noqa: E402
 import yaml  # noqa: E402
+from common import load_model  # noqa: E402
 from stable_baselines3.common.base_class import BaseAlgorithm  # noqa: E402
 from stable_baselines3.common.env_util import make_vec_env  # noqa: E402
 from stable_baselines3.common.vec_env import VecEnv, VecFrameStack, VecNormalize  # noqa: E402
@@ -257,7 +258,7 @@ def main(argv: list[str] | None = None) -> Path:
     if not env_id:
         raise SystemExit("Pass --env: no rl-zoo args.yml next to the model says which env it was trained on.")
     algo_class = detect_algorithm(args.model, args.algo)
-    model = algo_class.load(args.model, device="cpu")
+    model = load_model(parser, algo_class, args.model)
     env = make_env(env_id, config, saved_args, vec_normalize, model, args.seed)
 
     def frame() -> np.ndarray:  # a rendering failure gets the install hints; other errors are raised as they are

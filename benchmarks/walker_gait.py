@@ -20,7 +20,7 @@ import argparse
 import gymnasium as gym
 import numpy as np
 import shimmy
-from common import algorithm_classes
+from common import algorithm_classes, load_model
 from stable_baselines3.common.base_class import BaseAlgorithm
 from walker_shaping import STAND_HEIGHT, UprightStart, walker_physics
 
@@ -58,7 +58,7 @@ def main(argv: list[str] | None = None) -> None:
     if args.episodes < 1:
         parser.error(f"--episodes {args.episodes}: it must be at least 1")
 
-    model: BaseAlgorithm = ALGORITHMS[args.algo].load(args.model, device="cpu")
+    model = load_model(parser, ALGORITHMS[args.algo], args.model)
     env = gym.make("dm_control/walker-walk-v0")
     if args.upright_starts:
         env = UprightStart(env, probability=1.0)

@@ -40,6 +40,11 @@ def load_registered(name: str) -> ModuleType:
             "--set n_deltaa: not a constructor argument of ARS (it takes alive_bonus_offset, common_seeds, delta_std",
         ),
         ("headline", ["--set", "seed=3"], "--set seed: give it with --seeds"),
+        # refused before any training: the env, the policy and the values the constructor checks
+        ("headline", ["--env", "FooEnv-v0"], "ARS('MlpPolicy', 'FooEnv-v0', ...): Environment `FooEnv` doesn't exist"),
+        ("headline", ["--policy", "FooPolicy"], "Policy 'FooPolicy' unknown: ARS's policies are LinearPolicy"),
+        ("headline", ["--set", "n_delta=abc"], "n_delta='abc': it must be a whole number"),
+        ("headline", ["--set", "n_delta=[1,"], "argument --set: 'n_delta=[1,': '[1,' is not a YAML value"),
         (
             "ars_paper",
             ["--variants", "V1,v2"],
@@ -47,6 +52,8 @@ def load_registered(name: str) -> ModuleType:
         ),
         ("ars_paper", ["--max-seconds", "0"], "--max-seconds 0: it must be positive"),
         ("walker_gait", ["model.zip", "--episodes", "0"], "--episodes 0: it must be at least 1"),
+        ("walker_gait", ["model.zip"], "model.zip: no such model; give a saved model's .zip file"),
+        ("pair_noise", ["model.zip", "Pendulum-v1"], "model.zip: no such model; give a saved model's .zip file"),
         ("walker_gait", ["model.zip", "--algo", "Foo"], "invalid choice: 'Foo' (choose from 'ARS', "),
         ("throughput", ["--seconds", "0", "--warmup", "0"], "--seconds 0: it must be positive"),
         ("throughput", ["--warmup", "-1"], "--warmup -1: it must be 0 or more"),
