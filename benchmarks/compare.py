@@ -592,6 +592,15 @@ def run_one(
     start = time.perf_counter()
     try:
         model.learn(total, callback=[*manager.callbacks, recorder], reset_num_timesteps=continue_from is None)
+    except KeyboardInterrupt:
+        kept = [name for name in ("evaluations.npz", "last_model.zip") if (folder / name).is_file()]
+        print(
+            f"\n{label}: interrupted at {model.num_timesteps:,} env steps; the run has no summary.json, so reports "
+            f"leave it out. Kept in {folder}: {', '.join(kept) or 'nothing (no evaluation yet)'}"
+            + (f"; train on with --continue-from {folder / 'last_model.zip'} --out ANOTHER_FOLDER." if kept else "."),
+            file=sys.stderr,
+        )
+        raise
     finally:
         progress.close()
     total_s = time.perf_counter() - start
@@ -1155,4 +1164,7 @@ def main(argv: list[str] | None = None) -> Path:
 
 
 if __name__ == "__main__":
-    main()
+    try:
+        main()
+    except KeyboardInterrupt:
+        sys.exit(130)  # what was kept is said above; no traceback for a Ctrl-C
