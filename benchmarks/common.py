@@ -124,13 +124,16 @@ def selection_problems(seeds: list[int], envs: list[str], thresholds: dict[str, 
     :param seeds: ``--seeds``.
     :param envs: ``--envs``.
     :param thresholds: ``--threshold`` values per env id.
-    :return: What a script would otherwise silently get wrong: repeated seeds (one run folder each), thresholds for
-        envs it does not run.
+    :return: What a script would otherwise silently get wrong: repeated seeds or envs (one run folder each),
+        thresholds for envs it does not run.
     """
     problems = []
     repeated = sorted({seed for seed in seeds if seeds.count(seed) > 1})
     if repeated:
         problems.append(f"--seeds repeats {repeated}: each seed is one run (and one run folder)")
+    repeated_envs = sorted({env for env in envs if envs.count(env) > 1})
+    if repeated_envs:
+        problems.append(f"--envs repeats {repeated_envs}: give each once (a seed is one run on each)")
     stray = sorted(set(thresholds) - set(envs))
     if stray:
         problems.append(f"--threshold for {stray}, which --envs {envs} does not run")

@@ -520,8 +520,10 @@ def run_one(
                 f"--continue-from {continue_from} lies in the run folder {folder}, which the new run replaces: "
                 "give another --out, or copy the model elsewhere first."
             )
-    replaced = None
+    replaced, replaced_tb = None, None
     if folder.exists():  # a new run of the same (algorithm, env, seed) replaces the old one once it is set up
+        with contextlib.suppress(OSError, ValueError, AttributeError):  # its TensorBoard run goes too
+            replaced_tb = json.loads((folder / "summary.json").read_text()).get("tensorboard_dir")
         replaced = Path(tempfile.mkdtemp(prefix=".replaced_", dir=out)) / folder.name
         folder.rename(replaced)
     try:
@@ -572,6 +574,8 @@ def run_one(
         raise
     if replaced is not None:
         shutil.rmtree(replaced.parent)
+    if replaced_tb and Path(replaced_tb).resolve().is_relative_to((out / "tb").resolve()):
+        shutil.rmtree(replaced_tb, ignore_errors=True)
     model, hyperparams = result
     total = manager.n_timesteps
     offset = model.num_timesteps  # 0 for a new model; a continued one goes on from its saved count
@@ -949,6 +953,9 @@ def check_run_arguments(args: argparse.Namespace, thresholds: dict[str, float], 
         if value is not None and not value >= low:  # NaN too
             problems.append(f"{flag} {value}: it must be {'positive' if low > 0 else '0 or more'}")
     problems += selection_problems(args.seeds, args.envs, thresholds)
+    repeated_algos = sorted({algo for algo in args.algos if args.algos.count(algo) > 1})
+    if repeated_algos:
+        problems.append(f"--algos repeats {repeated_algos}: give each once (a seed is one run of each)")
     unknown_algos = sorted(set(overrides) - set(args.algos))
     if unknown_algos:
         problems.append(f"--override for {unknown_algos}, which --algos {args.algos} does not run")

@@ -7,6 +7,7 @@ flags the benchmark scripts refuse rather than ignore.
 from __future__ import annotations
 
 import json
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -102,6 +103,15 @@ def test_compare_refuses_step_counts_that_are_not_whole(
     assert f"argument --steps: '{text}' is {message}" in capsys.readouterr().err
 
 
+def test_a_run_again_into_the_same_folder_replaces_its_tensorboard_run(tmp_path: Any) -> None:
+    args = ["--algos", "ars_es", "--envs", "CartPole-v1", "--seeds", "0", "--steps", "200", "--eval-freq", "0"]
+    for _ in range(2):
+        load_script("compare").main([*args, "--override", "ars_es:n_delta=2", "ars_es:n_top=2", "--out", str(tmp_path)])
+    summary = json.loads((tmp_path / "logs" / "ars_es" / "CartPole-v1_1_seed0" / "summary.json").read_text())
+    runs = [path.name for path in (tmp_path / "tb" / "CartPole-v1").iterdir()]
+    assert runs == [Path(summary["tensorboard_dir"]).name]
+
+
 def test_a_run_continues_from_its_last_model(tmp_path: Any) -> None:
     main = load_script("compare").main
     common = ["--algos", "ars_es", "--envs", "CartPole-v1", "--seeds", "0", "--eval-freq", "1000"]
@@ -144,6 +154,8 @@ def test_a_run_continues_from_its_last_model(tmp_path: Any) -> None:
         (["--steps", "100", "--seconds", "-1", "--eval-freq", "-5"], r"--seconds -1.0: .*--eval-freq -5: it must be 0"),
         (["--steps", "100", "--eval-episodes", "0"], r"--eval-episodes 0: it must be positive"),
         (["--steps", "100", "--seeds", "0", "0"], r"--seeds repeats \[0\]"),
+        (["--steps", "100", "--envs", "CartPole-v1", "CartPole-v1"], r"--envs repeats \['CartPole-v1'\]"),
+        (["--steps", "100", "--algos", "ars_es", "ars_es"], r"--algos repeats \['ars_es'\]"),
         (["--steps", "100", "--threshold", "CartPol-v1=400"], r"--threshold for \['CartPol-v1'\], which --envs"),
         (["--steps", "100", "--stop-at-threshold"], r"--stop-at-threshold stops at a --threshold"),
         (["--steps", "100", "--override", "ppo:n_steps=64"], r"--override for \['ppo'\], which --algos"),
