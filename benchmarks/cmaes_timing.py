@@ -18,7 +18,7 @@ from collections.abc import Callable
 from typing import Any
 
 import numpy as np
-from common import hardware, versions
+from common import hardware, positive_problems, versions
 from stable_baselines3.common.env_util import make_vec_env
 from torch import nn
 
@@ -86,12 +86,15 @@ def measure(diagonal: bool | str, generations: int, n_envs: int, seed: int) -> d
     }
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--generations", type=int, default=4)
     parser.add_argument("--n-envs", type=int, default=2)
     parser.add_argument("--seed", type=int, default=0)
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
+    problems = positive_problems({"--generations": args.generations, "--n-envs": args.n_envs})
+    if problems:
+        parser.error("; ".join(problems) + ".")
     print("# CMA-ES strategy vs rollout time, BipedalWalker-v3, 2,804 parameters, population 64")
     print(f"hardware: {hardware()}; n_envs={args.n_envs}; versions: {versions()}")
     print("| covariance | ask+tell s/gen | rollout s/gen | strategy share |")

@@ -20,8 +20,9 @@ import argparse
 import json
 import time
 
+import gymnasium as gym
 import numpy as np
-from common import step_count
+from common import positive_problems, step_count
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.evaluation import evaluate_policy
@@ -70,7 +71,7 @@ def check(algo: str, path: str, env_id: str, episodes: int) -> None:
     print(f"{path}: {returns.mean():.1f} +- {returns.std():.1f} (min {returns.min():.1f}, n={len(returns)})")
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("algo", help="sb3-es class name: ARS, OpenES, CMAES, PGPE, SimpleES")
     parser.add_argument("kwargs", nargs="?", default="{}", help="constructor arguments as JSON")
@@ -84,11 +85,24 @@ def main() -> None:
     parser.add_argument("--out", default="results/pilot/run", help="prefix of the saved models")
     parser.add_argument("--check", metavar="ZIP", help="only evaluate this saved model over --check-episodes")
     parser.add_argument("--check-episodes", type=int, default=100)
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
+    counts = {"--n-envs": args.n_envs, "--seconds": args.seconds, "--every": args.every}
+    problems = positive_problems({**counts, "--check-episodes": args.check_episodes})
+    if not hasattr(sb3_es, args.algo):
+        problems.append(f"{args.algo}: not an sb3-es class; give ARS, OpenES, CMAES, PGPE or SimpleES")
+    try:
+        kwargs = json.loads(args.kwargs)  # a JSON list for reward_clip is fine: the algorithm validates it
+    except json.JSONDecodeError as e:
+        problems.append(f"{args.kwargs!r}: not JSON ({e}); give the arguments as '{{\"n_delta\": 16}}'")
+    try:
+        gym.spec(args.env)
+    except gym.error.Error as e:
+        problems.append(f"--env {args.env}: {str(e).rstrip('.')}")
+    if problems:
+        parser.error("; ".join(problems) + ".")
     if args.check:
         check(args.algo, args.check, args.env, args.check_episodes)
         return
-    kwargs = json.loads(args.kwargs)  # a JSON list for reward_clip is fine: the algorithm validates it
     env = make_vec_env(args.env, n_envs=args.n_envs, seed=args.seed)
     eval_env = make_vec_env(args.env, n_envs=1, seed=1000 + args.seed)
     model = getattr(sb3_es, args.algo)(args.policy, env, seed=args.seed, **kwargs)

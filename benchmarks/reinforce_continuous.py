@@ -21,8 +21,9 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
-from common import step_count
+from common import positive_problems, selection_problems, step_count
 
 
 def run_seed(config: dict[str, Any]) -> dict[str, Any]:
@@ -73,7 +74,7 @@ def run_seed(config: dict[str, Any]) -> dict[str, Any]:
     )
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--env", default="LunarLanderContinuous-v3", help="Box action space env id")
     parser.add_argument("--timesteps", type=step_count, default=100_000, help="env steps per seed")
@@ -87,7 +88,16 @@ def main() -> None:
     parser.add_argument("--no-baseline", action="store_true", help="plain REINFORCE, without the value baseline")
     parser.add_argument("--eval-episodes", type=int, default=10)
     parser.add_argument("--workers", type=int, default=2, help="seeds trained in parallel processes")
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
+    flags = ("--timesteps", "--n-envs", "--n-episodes", "--n-bins", "--learning-rate", "--eval-episodes", "--workers")
+    problems = positive_problems({flag: getattr(args, flag[2:].replace("-", "_")) for flag in flags})
+    problems += selection_problems(args.seeds, [args.env], {})
+    try:
+        gym.spec(args.env)
+    except gym.error.Error as e:
+        problems.append(f"--env {args.env}: {str(e).rstrip('.')}")
+    if problems:
+        parser.error("; ".join(problems) + ".")
 
     configs = [dict(vars(args), seed=seed) for seed in args.seeds]
     start = time.perf_counter()

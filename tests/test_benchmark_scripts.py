@@ -1,5 +1,6 @@
-"""The benchmark scripts without tests of their own (headline, ars_paper, walker_gait, throughput, render): what they
-refuse before any work, with the message that says the fix, and what the headline records."""
+"""The benchmark scripts without tests of their own (headline, ars_paper, walker_gait, throughput, render, pilot,
+cmaes_timing, reinforce_continuous, pair_noise): what they refuse before any work, with the message that says the
+fix, and what the headline records."""
 
 from __future__ import annotations
 
@@ -57,6 +58,10 @@ def load_registered(name: str) -> ModuleType:
         ("walker_gait", ["model.zip", "--algo", "Foo"], "invalid choice: 'Foo' (choose from 'ARS', "),
         ("throughput", ["--seconds", "0", "--warmup", "0"], "--seconds 0: it must be positive"),
         ("throughput", ["--warmup", "-1"], "--warmup -1: it must be 0 or more"),
+        ("pilot", ["Foo", "{n_delta: 4}", "--every", "0"], "--every 0: it must be positive; Foo: not an sb3-es class"),
+        ("pilot", ["ARS", "{n_delta: 4}"], "'{n_delta: 4}': not JSON"),
+        ("cmaes_timing", ["--generations", "0"], "--generations 0: it must be positive"),
+        ("reinforce_continuous", ["--workers", "0", "--env", "Foo-v1"], "--workers 0: it must be positive; --env Foo"),
         ("render", ["model.zip", "--out", "b.avi"], "--out b.avi: unsupported output; give a .gif or .mp4 file"),
     ],
 )
