@@ -96,7 +96,7 @@ def run(
     episodes = 0
     # one evaluation at least, however short the wall-clock limit
     while not history or (model.num_timesteps < steps and time.perf_counter() - start < max_seconds):
-        model.learn(eval_every, reset_num_timesteps=False)
+        model.learn(max(min(eval_every, steps - model.num_timesteps), 1), reset_num_timesteps=False)  # not past steps
         episodes = model._n_updates * 2 * preset["n_delta"]  # one episode per candidate
         mean, _ = evaluate_policy(model, eval_env, n_eval_episodes=5)
         history.append((model.num_timesteps, episodes, float(mean)))  # type: ignore[arg-type]
