@@ -119,6 +119,21 @@ def positive_problems(flags: dict[str, float | None]) -> list[str]:
     ]
 
 
+def env_id_problems(flag: str, env_ids: list[str]) -> list[str]:
+    """
+    :param flag: The flag that gave the env ids, for the messages.
+    :param env_ids: Env ids.
+    :return: ``FLAG ID: Gymnasium's reason`` for each id that is not registered (checked before any run).
+    """
+    problems = []
+    for env_id in env_ids:
+        try:
+            gym.spec(env_id)
+        except gym.error.Error as e:
+            problems.append(f"{flag} {env_id}: {str(e).rstrip('.')}")
+    return problems
+
+
 def selection_problems(seeds: list[int], envs: list[str], thresholds: dict[str, float]) -> list[str]:
     """
     :param seeds: ``--seeds``.

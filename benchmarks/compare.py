@@ -75,7 +75,16 @@ import gymnasium as gym
 import numpy as np
 import torch
 import yaml
-from common import hardware, parse_thresholds, read_value, selection_problems, source_commit, step_count, versions
+from common import (
+    env_id_problems,
+    hardware,
+    parse_thresholds,
+    read_value,
+    selection_problems,
+    source_commit,
+    step_count,
+    versions,
+)
 from stable_baselines3.common.callbacks import EvalCallback
 from stable_baselines3.common.evaluation import evaluate_policy
 from stable_baselines3.common.utils import set_random_seed
@@ -964,11 +973,7 @@ def check_run_arguments(args: argparse.Namespace, thresholds: dict[str, float], 
     missing = [algo for algo in args.algos if algo not in rl_zoo3.ALGOS]
     if missing:
         problems.append(f"--algos {missing}: unknown or unavailable (known: {sorted(rl_zoo3.ALGOS)})")
-    for env_id in args.envs:  # checked before any run, not when its turn comes after hours of others
-        try:
-            gym.spec(env_id)
-        except gym.error.Error as e:
-            problems.append(f"--envs {env_id}: {e}")
+    problems += env_id_problems("--envs", args.envs)  # before any run, not when its turn comes after hours of others
     for algo, values in overrides.items():
         if algo not in rl_zoo3.ALGOS:
             continue

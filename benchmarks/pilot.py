@@ -20,9 +20,8 @@ import argparse
 import json
 import time
 
-import gymnasium as gym
 import numpy as np
-from common import positive_problems, step_count
+from common import env_id_problems, positive_problems, step_count
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.evaluation import evaluate_policy
@@ -94,10 +93,7 @@ def main(argv: list[str] | None = None) -> None:
         kwargs = json.loads(args.kwargs)  # a JSON list for reward_clip is fine: the algorithm validates it
     except json.JSONDecodeError as e:
         problems.append(f"{args.kwargs!r}: not JSON ({e}); give the arguments as '{{\"n_delta\": 16}}'")
-    try:
-        gym.spec(args.env)
-    except gym.error.Error as e:
-        problems.append(f"--env {args.env}: {str(e).rstrip('.')}")
+    problems += env_id_problems("--env", [args.env])
     if problems:
         parser.error("; ".join(problems) + ".")
     if args.check:

@@ -21,9 +21,8 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
-from common import positive_problems, selection_problems, step_count
+from common import env_id_problems, positive_problems, selection_problems, step_count
 
 
 def run_seed(config: dict[str, Any]) -> dict[str, Any]:
@@ -92,10 +91,7 @@ def main(argv: list[str] | None = None) -> None:
     flags = ("--timesteps", "--n-envs", "--n-episodes", "--n-bins", "--learning-rate", "--eval-episodes", "--workers")
     problems = positive_problems({flag: getattr(args, flag[2:].replace("-", "_")) for flag in flags})
     problems += selection_problems(args.seeds, [args.env], {})
-    try:
-        gym.spec(args.env)
-    except gym.error.Error as e:
-        problems.append(f"--env {args.env}: {str(e).rstrip('.')}")
+    problems += env_id_problems("--env", [args.env])
     if problems:
         parser.error("; ".join(problems) + ".")
 
