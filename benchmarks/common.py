@@ -67,8 +67,12 @@ def read_value(text: str) -> Any:
 
     :param text: The value as typed.
     :return: The value.
+    :raises ValueError: Saying why, in one line, when ``text`` is not YAML.
     """
-    value = yaml.safe_load(text)
+    try:
+        value = yaml.safe_load(text)
+    except yaml.YAMLError as e:
+        raise ValueError(f"{type(e).__name__}: {str(e).splitlines()[0]}") from e
     if isinstance(value, str):
         with contextlib.suppress(ValueError):
             return float(value)
@@ -289,11 +293,10 @@ def load_model(parser: argparse.ArgumentParser, algo_class: type[BaseAlgorithm],
     :param path: The model's ``.zip`` file (the suffix may be left out, as ``load()`` allows).
     :return: The model, on the CPU.
     """
-    path = Path(path)
-    if not (path.is_file() or path.with_name(f"{path.name}.zip").is_file()):
-        parser.error(f"{path}: no such model; give a saved model's .zip file.")
     try:
         return algo_class.load(path, device="cpu")
+    except FileNotFoundError:  # SB3 tries the path, then with .zip added
+        parser.error(f"{path}: no such model; give a saved model's .zip file.")
     except (ValueError, KeyError, TypeError) as e:
         parser.error(
             f"{path}: {algo_class.__name__} cannot load it ({type(e).__name__}: {e}); give the algorithm that saved it."

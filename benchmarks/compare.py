@@ -579,10 +579,10 @@ def run_one(
         if replaced is not None:  # the old run is put back: nothing is lost to a run that could not start
             shutil.rmtree(folder, ignore_errors=True)
             replaced.rename(folder)
-            shutil.rmtree(replaced.parent)
         raise
-    if replaced is not None:
-        shutil.rmtree(replaced.parent)
+    finally:
+        if replaced is not None:
+            shutil.rmtree(replaced.parent)
     if replaced_tb and Path(replaced_tb).resolve().is_relative_to((out / "tb").resolve()):
         shutil.rmtree(replaced_tb, ignore_errors=True)
     model, hyperparams = result
@@ -934,9 +934,10 @@ def parse_overrides(items: list[str]) -> dict[str, dict[str, Any]]:
             overrides[algo][key] = read_value(value)
             if isinstance(overrides[algo][key], str) and "(" in value:
                 compile(overrides[algo][key], "--override", "eval")  # rl-zoo evaluates it: "dict(...)"
-        except (yaml.YAMLError, SyntaxError) as e:
+        except (ValueError, SyntaxError) as e:  # read_value's one-line reason, or the expression's
+            reason = f"SyntaxError: {str(e).splitlines()[0]}" if isinstance(e, SyntaxError) else str(e)
             raise SystemExit(
-                f"--override {item!r}: {value!r} is not a value ({type(e).__name__}: {str(e).splitlines()[0]}); "
+                f"--override {item!r}: {value!r} is not a value ({reason}); "
                 "write numbers, true/false, [lists] or a Python expression such as dict(net_arch=[64, 64])"
             ) from e
     return dict(overrides)

@@ -22,7 +22,6 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 import torch
-import yaml
 from common import algorithm_classes, read_value, selection_problems, source_commit, step_count, system_info
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.env_util import make_vec_env
@@ -46,8 +45,8 @@ def key_value(text: str) -> tuple[str, Any]:
         raise argparse.ArgumentTypeError(f"{text!r} is not KEY=VALUE; give one such as n_delta=16")
     try:
         return key, read_value(value)
-    except yaml.YAMLError as e:
-        raise argparse.ArgumentTypeError(f"{text!r}: {value!r} is not a YAML value ({str(e).splitlines()[0]})") from e
+    except ValueError as e:  # read_value's one-line reason
+        raise argparse.ArgumentTypeError(f"{text!r}: {value!r} is not a YAML value ({e})") from e
 
 
 def set_problems(algo: str, items: list[tuple[str, Any]]) -> list[str]:
