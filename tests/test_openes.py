@@ -141,6 +141,8 @@ def test_shape_fitness_options() -> None:
     assert z.mean() == pytest.approx(0.0, abs=1e-12) and z.std() == pytest.approx(1.0)
     np.testing.assert_allclose(z, (fitness - fitness.mean()) / fitness.std())
     np.testing.assert_array_equal(shape_fitness(np.full(4, 3.0), "zscore"), 0.0)
+    for value, n in ((0.3, 10), (1 / 3, 10), (200.7, 6)):  # their std() rounds to about 1e-17, not 0: it gave +-1
+        np.testing.assert_array_equal(shape_fitness(np.full(n, value), "zscore"), 0.0)
     np.testing.assert_array_equal(shape_fitness(fitness, "raw"), fitness)
     with pytest.raises(ValueError, match="fitness_shaping"):
         shape_fitness(fitness, "rank")  # type: ignore[arg-type]
@@ -167,6 +169,20 @@ def test_strategy_update_uses_the_shaped_fitness(shaping: str) -> None:
     grad = noise.T @ shape_fitness(fitness, shaping) / (8 * 0.2)  # type: ignore[arg-type]
     np.testing.assert_allclose(strategy.center, center + 0.3 * grad, rtol=1e-10)
     assert info["grad_norm"] == pytest.approx(np.linalg.norm(grad))
+
+
+@pytest.mark.parametrize("shaping", ["zscore", "raw"])
+@pytest.mark.parametrize("optimizer", ["clipup", "adam"])
+def test_a_flat_mirrored_generation_leaves_the_center(shaping: str, optimizer: str) -> None:
+    # Every candidate scores the same (e.g. all 500 on CartPole): the gradient is 0. Summed as +eps and -eps terms it
+    # was about 5e-13, which ClipUp normalized into a full step in a random direction.
+    strategy = OpenESStrategy(
+        np.zeros(50), 32, sigma=0.1, learning_rate=0.05, optimizer=optimizer, fitness_shaping=shaping, seed=0
+    )
+    strategy.ask()
+    info = strategy.tell(np.full(32, 500.0))
+    assert info["grad_norm"] == 0.0
+    np.testing.assert_array_equal(strategy.center, 0.0)
 
 
 def test_adam_and_sgd_momentum_steps() -> None:

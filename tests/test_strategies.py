@@ -46,7 +46,7 @@ def test_best_candidate_is_tracked_by_every_strategy(name: str) -> None:
 @pytest.mark.parametrize("name", STRATEGIES)
 def test_tell_checks_the_fitness_before_changing_anything(name: str) -> None:
     strategy = STRATEGIES[name](np.ones(4), seed=0)
-    with pytest.raises(RuntimeError, match="before ask"):
+    with pytest.raises(RuntimeError, match=r"none is pending \(ask\(\) not called yet, or .* already told\)"):
         strategy.tell(np.zeros(6))
     strategy.ask()
     center = strategy.center.copy()
@@ -58,6 +58,43 @@ def test_tell_checks_the_fitness_before_changing_anything(name: str) -> None:
     assert strategy.best_fitness == -np.inf
     strategy.tell(np.arange(6.0))  # the asked population is still there
     assert not np.array_equal(strategy.center, center)
+    with pytest.raises(RuntimeError, match="already told"):  # it said "called before ask()"
+        strategy.tell(np.arange(6.0))
+
+
+@pytest.mark.parametrize("name", STRATEGIES)
+@pytest.mark.parametrize(
+    ("center", "match"),
+    [
+        (np.zeros((2, 3)), r"1-D array of parameters, got shape \(2, 3\)"),
+        (np.zeros(0), r"non-empty 1-D array of parameters, got shape \(0,\)"),
+        (np.array([0.0, np.nan, 1.0]), r"entries \[1\] are NaN or infinite"),
+    ],
+    ids=["2-D", "empty", "nan"],
+)
+def test_a_bad_center_is_refused_by_name(name: str, center: np.ndarray, match: str) -> None:
+    # a 2-D center failed later with a broadcast error, an empty one was accepted, and a NaN one was blamed on the
+    # environment's rewards at the first tell()
+    with pytest.raises(ValueError, match=match):
+        STRATEGIES[name](center, seed=0)
+    strategy = STRATEGIES[name](np.zeros(3), seed=0)
+    with pytest.raises(ValueError, match=match):
+        strategy.set_center(center)
+    np.testing.assert_array_equal(strategy.center, 0.0)
+
+
+def test_simple_es_weights_follow_a_new_n_elite() -> None:
+    # check_settings() (run when load() changes a setting) accepted a new n_elite and kept the old weights: the next
+    # tell() failed in a matrix product; a bad weights name passed
+    strategy = SimpleESStrategy(np.zeros(3), 6, sigma=0.1, n_elite=2, seed=0)
+    strategy.n_elite = 4
+    strategy.check_settings()
+    assert strategy.elite_weights.shape == (4,) and strategy.elite_weights.sum() == pytest.approx(1.0)
+    strategy.ask()
+    strategy.tell(np.arange(6.0))
+    strategy.weights = "bogus"  # type: ignore[assignment]
+    with pytest.raises(ValueError, match="weights='bogus'"):
+        strategy.check_settings()
 
 
 def test_best_params_of_a_noise_table_population_are_its_row() -> None:

@@ -46,7 +46,7 @@ class Strategy(ABC):
     pending_attributes: ClassVar[tuple[str, ...]] = ("_asked",)
 
     def __init__(self, center: np.ndarray, seed: int | np.random.SeedSequence | None = None) -> None:
-        self.center = np.asarray(center, dtype=np.float64).copy()
+        self.center = checked_center(center)
         self.rng = np.random.default_rng(seed)
         self.best_params = self.center.copy()
         self.best_fitness = -np.inf
@@ -82,7 +82,10 @@ class Strategy(ABC):
         :return: Scalars worth logging (logged under ``train/``), ``best_fitness`` included.
         """
         if self._asked is None:
-            raise RuntimeError("tell() called before ask().")
+            raise RuntimeError(
+                "tell() needs the generation of an ask(): none is pending (ask() not called yet, or "
+                "this generation was already told)."
+            )
         fitness = check_fitness(fitness, len(self._asked))
         best = int(np.argmax(fitness))
         if self.forget_best or fitness[best] > self.best_fitness:
@@ -127,10 +130,10 @@ class Strategy(ABC):
 
         :param center: The new center.
         """
-        center = np.asarray(center, dtype=np.float64)
+        center = checked_center(center)
         if center.shape != self.center.shape:
             raise ValueError(f"Center of shape {center.shape} does not match the strategy's {self.center.shape}.")
-        self.center = center.copy()
+        self.center = center
 
     def without_pending(self) -> Strategy:
         """
@@ -272,3 +275,19 @@ def check_fitness(fitness: np.ndarray, expected: int) -> np.ndarray:
             "the update was not applied. Check the environment's rewards (NaN/inf) or lower the noise."
         )
     return fitness
+
+
+def checked_center(center: np.ndarray) -> np.ndarray:
+    """
+    Validate a center (the search distribution's mean) given to a strategy.
+
+    :param center: The center: a non-empty 1-D array of finite numbers.
+    :return: A float64 copy.
+    """
+    array = np.array(center, dtype=np.float64)
+    if array.ndim != 1 or array.size == 0:
+        raise ValueError(f"center: give a non-empty 1-D array of parameters, got shape {array.shape}.")
+    bad = np.flatnonzero(~np.isfinite(array))
+    if bad.size:
+        raise ValueError(f"center: entries {bad[:5].tolist()} are NaN or infinite; give finite parameters.")
+    return array

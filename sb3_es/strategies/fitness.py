@@ -34,8 +34,9 @@ def shape_fitness(fitness: np.ndarray, shaping: FitnessShaping) -> np.ndarray:
     if shaping == "centered_rank":
         return centered_ranks(fitness)
     if shaping == "zscore":
-        std = fitness.std()
-        return (fitness - fitness.mean()) / std if std > 0 else np.zeros_like(fitness)
+        if np.ptp(fitness) == 0:  # equal values: std() can round to about 1e-17 and give +-1
+            return np.zeros_like(fitness)
+        return (fitness - fitness.mean()) / fitness.std()
     if shaping == "raw":
         return fitness
     raise ValueError(f"fitness_shaping={shaping!r}: choose one of {', '.join(map(repr, FITNESS_SHAPINGS))}.")

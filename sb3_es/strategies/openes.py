@@ -143,7 +143,11 @@ class OpenESStrategy(GradientStrategy):
 
     def _tell(self, fitness: np.ndarray) -> dict[str, float]:
         assert self._noise is not None
-        grad = self._noise.T @ fitness / (self.population_size * self.sigma)
+        if self.antithetic:  # from each pair's difference: exactly 0 for equal members (a sum of +-eps is not)
+            half = self.population_size // 2
+            grad = self._noise[:half].T @ (fitness[:half] - fitness[half:]) / (self.population_size * self.sigma)
+        else:
+            grad = self._noise.T @ fitness / (self.population_size * self.sigma)
         # OpenAI-ES adds l2coeff * theta to the descent direction.
         self._ascend(grad - self.weight_decay * self.center)
         self._noise = None

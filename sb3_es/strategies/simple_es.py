@@ -73,9 +73,8 @@ class SimpleESStrategy(Strategy):
         self.population_size = population_size
         self.sigma = float(sigma)
         self.n_elite = n_elite
-        self.check_settings()
         self.weights: EliteWeights = weights
-        self.elite_weights = elite_weights(self.n_elite, weights)
+        self.check_settings()
         self.noise_table = noise_table
 
     def check_settings(self) -> None:
@@ -84,6 +83,7 @@ class SimpleESStrategy(Strategy):
         if self.n_elite > self.population_size:
             raise ValueError(f"n_elite={self.n_elite} must be between 1 and population_size={self.population_size}.")
         check_positive_number("sigma", self.sigma)
+        self.elite_weights = elite_weights(self.n_elite, self.weights)  # checks the name; follows a new n_elite
 
     def _ask(self) -> Population:
         if self.noise_table is None:
