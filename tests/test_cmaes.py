@@ -354,6 +354,59 @@ def test_bipop_small_runs_are_capped_and_do_not_count_as_restarts() -> None:
     assert strategy._regime == "small" and strategy.es.opts["maxiter"] == 3
 
 
+@pytest.mark.parametrize("options", [dict(ftarget=1e-2), dict(maxfevals=200)], ids=["ftarget", "maxfevals"])
+def test_ftarget_and_maxfevals_end_the_search_without_a_restart(options: dict) -> None:
+    # as in pycma's fmin: they restarted IPOP three more times (maxfevals counted per run)
+    def sphere(x: np.ndarray) -> np.ndarray:
+        return -np.sum((x - 1.0) ** 2, axis=1)
+
+    strategy = CMAESStrategy(np.zeros(6), sigma=0.5, seed=0, restarts="ipop", max_restarts=3, cma_options=options)
+    evaluations = 0
+    while not strategy.stopped and evaluations < 100_000:
+        population = strategy.ask()
+        evaluations += len(population)
+        strategy.tell(sphere(population))
+    assert strategy.stopped and strategy.reached_an_end and strategy.n_restarts == 0
+    assert set(strategy.last_stop) & set(options)
+    assert evaluations <= options.get("maxfevals", np.inf) + strategy.population_size
+
+
+def test_maxfevals_counts_the_evaluations_of_every_run() -> None:
+    strategy = CMAESStrategy(np.zeros(5), sigma=0.5, restarts="ipop", cma_options={"maxfevals": 1_000}, seed=0)
+    strategy.es.countevals = 300  # the run now ending, stopped by another condition
+    strategy._restart()
+    assert strategy.es.opts["maxfevals"] == 700
+
+
+def test_the_stop_warning_after_ftarget_does_not_advise_restarts() -> None:
+    model = CMAES("LinearPolicy", "CartPole-v1", seed=0, restarts="ipop", cma_options=dict(ftarget=-10.0))
+    with pytest.warns(UserWarning, match=r"ftarget and maxfevals end the search, as in pycma's fmin"):
+        model.learn(100_000)
+    assert model.strategy.stopped and model.strategy.n_restarts == 0
+
+
+@pytest.mark.parametrize("key", ["bounds", "fixed_variables", "scaling_of_variables", "typical_x", "transformation"])
+def test_cma_options_that_transform_the_search_space_are_refused(key: str) -> None:
+    # pycma's mean is then not the policy's parameters: typical_x=[5]*4 put [-4, ...] into the policy while pycma's
+    # solution was [1, ...]; fixed_variables failed with a shape error
+    with pytest.raises(ValueError, match=rf"cma_options\['{key}'\]: this option makes pycma search a transformed"):
+        CMAESStrategy(np.zeros(4), sigma=0.3, seed=0, cma_options={key: None})
+
+
+def test_weights_written_during_a_bipop_small_run_keep_its_cap_and_its_evaluations() -> None:
+    strategy = CMAESStrategy(np.zeros(5), sigma=0.5, restarts="bipop", max_restarts=1, seed=0)
+    strategy._budget = {"large": 2_000, "small": 0}
+    strategy._restart()  # a small run, capped
+    cap = strategy.es.opts["maxiter"]
+    for _ in range(2):
+        strategy.ask()
+        strategy.tell(np.arange(float(strategy.population_size)))
+    spent, budget = strategy.es.countevals, dict(strategy._budget)
+    strategy.set_center(np.ones(5))
+    assert strategy._budget == {"large": 2_000, "small": budget["small"] + spent}
+    assert strategy.es.opts["maxiter"] == cap - 2
+
+
 @pytest.mark.parametrize("key", ["popsize", "seed", "CMA_diagonal"])
 def test_cma_options_set_by_sb3_es_are_rejected(key: str) -> None:
     with pytest.raises(ValueError, match=key):

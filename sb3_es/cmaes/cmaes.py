@@ -121,6 +121,11 @@ class CMAES(PopulationAlgorithm):
 
     def _keep_searching(self) -> str:
         """:return: How to keep searching once the stop conditions fired with no restart left."""
+        if self.strategy.reached_an_end:
+            return (
+                "cma_options' ftarget and maxfevals end the search, as in pycma's fmin (no restart follows); the "
+                "policy holds what it found. To search on, train a new model with a lower ftarget or more maxfevals."
+            )
         if self.restarts is None:
             return (
                 "To keep searching, train with restarts='ipop' or 'bipop', or relax the stop conditions with "

@@ -47,6 +47,10 @@ def _global_randn(*shape: int) -> np.ndarray:
 #: pycma's full covariance needs about this many ``n x n`` float64 matrices at its peak (C, B and the
 #: eigendecomposition's work arrays; measured with pycma 4.5 on 1,500 parameters).
 FULL_COVARIANCE_MATRICES = 5
+#: pycma options that make it search a transformed space: its mean would not be the policy's parameters.
+REMAPPING_OPTIONS = ("bounds", "fixed_variables", "scaling_of_variables", "typical_x", "transformation")
+#: Stop conditions that end the search, as in pycma's ``fmin``: no restart follows them.
+FINAL_STOPS = frozenset({"ftarget", "maxfevals"})
 
 
 def check_full_covariance_memory(num_params: int) -> None:
@@ -91,7 +95,8 @@ class CMAESStrategy(Strategy):
     """
 
     # pycma's ask() uses up state (TPA's mean-shift samples), so the candidates asked and not told are kept, in a save
-    # too, and asked again: a generation cut short (a callback, a mid-generation checkpoint) is run again as it was.
+    # too, and asked again: a generation cut short (a callback, a mid-generation checkpoint) is run again with the same
+    # candidates (their episodes start anew, and the steps already run stay counted).
     pending_attributes = Strategy.pending_attributes
 
     def __init__(
@@ -125,6 +130,13 @@ class CMAESStrategy(Strategy):
         for key in ("popsize", "seed", "CMA_diagonal", "randn"):
             if key in self.cma_options:
                 raise ValueError(f"cma_options[{key!r}] is set by sb3-es; use the matching CMAES argument instead.")
+        for key in REMAPPING_OPTIONS:
+            if key in self.cma_options:
+                raise ValueError(
+                    f"cma_options[{key!r}]: this option makes pycma search a transformed space, whose mean is not the "
+                    "policy's parameters, so sb3-es does not take it. Leave it out (the policy normalizes its "
+                    "observations; sigma sets the step size of every parameter)."
+                )
         self.default_population_size = int(4 + math.floor(3 * math.log(self.num_params)))
         self.base_population_size = population_size or self.default_population_size
         self.n_restarts = 0
@@ -198,6 +210,10 @@ class CMAESStrategy(Strategy):
         # global random state; a module-level function always reads the current (private, swapped-in) state.
         options = {"popsize": popsize, "CMA_diagonal": self.diagonal, "verbose": -9, "randn": _global_randn}
         options.update(self.cma_options)
+        given = self.cma_options.get("maxfevals")
+        user = parse_number(given) if isinstance(given, str) else given
+        if user is not None:  # counted over every run, as in pycma's fmin: what the earlier runs left
+            options["maxfevals"] = max(1, int(user) - sum(self._budget.values()))
         if maxiter is not None:  # a BIPOP small-population run's cap, below the user's own
             given = self.cma_options.get("maxiter")
             user = parse_number(given) if isinstance(given, str) else given  # None: a pycma expression, left out
@@ -229,7 +245,7 @@ class CMAESStrategy(Strategy):
         return self.restarts is not None and self.n_restarts - self._small_restarts < self.max_restarts
 
     def _ask(self) -> np.ndarray:
-        if self._exhausted and self._restart_left():  # stopped with no restart left; max_restarts was raised since
+        if self._exhausted and self._restart_left() and not self.reached_an_end:  # max_restarts was raised since
             self._exhausted = False
             self._restart()
         if self._solutions is None:  # else the generation asked and not told yet, asked again
@@ -245,16 +261,22 @@ class CMAESStrategy(Strategy):
         self.center = np.asarray(self.es.mean, dtype=np.float64).copy()
         stats = {"sigma": self.sigma, "population_size": float(self.population_size), "restarts": self.n_restarts}
         self.last_stop = dict(self.es.stop())
-        restart = bool(self.last_stop) and self._restart_left()
+        # As in pycma's fmin, reaching ftarget or using up maxfevals ends the search: no restart.
+        restart = bool(self.last_stop) and not self.reached_an_end and self._restart_left()
         self._exhausted = bool(self.last_stop) and not restart
         if restart:
             self._restart()
         return stats
 
     @property
+    def reached_an_end(self) -> bool:
+        """:return: Whether the last stop was ``ftarget`` or ``maxfevals`` (``cma_options``): no restart follows."""
+        return bool(self.last_stop.keys() & FINAL_STOPS)
+
+    @property
     def stopped(self) -> bool:
         """:return: Whether pycma's stop conditions fired and no restart is left to run."""
-        return self._exhausted and not self._restart_left()
+        return self._exhausted and (self.reached_an_end or not self._restart_left())
 
     def _restart(self) -> None:
         """Start a new pycma run from the best candidate found, with the population size of the restart scheme."""
@@ -286,8 +308,13 @@ class CMAESStrategy(Strategy):
         """A new pycma run from ``center`` with the current step size and population size (the covariance, the
         evolution paths and the stop conditions start afresh)."""
         super().set_center(center)
-        self.es, self._solutions = self._new_es(self.center, self.sigma, self.population_size), None
+        self._budget[self._regime] += int(self.es.countevals)  # the interrupted run's evaluations still count
+        maxiter = None
+        if self._regime == "small" and self.n_restarts:  # a BIPOP small run keeps what is left of its cap
+            maxiter = max(1, int(self.es.opts["maxiter"]) - int(self.es.countiter))
+        self.es, self._solutions = self._new_es(self.center, self.sigma, self.population_size, maxiter), None
         self._exhausted = False
+        self.last_stop = {}
 
     def __setstate__(self, state: dict[str, Any]) -> None:
         if "_solutions" not in state:  # before version 2, pycma's list was "_asked" (now the base class's own)
