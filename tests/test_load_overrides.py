@@ -126,6 +126,32 @@ def test_rl_zoos_enjoy_objects_are_accepted(cls: type[BaseAlgorithm], tmp_path: 
 
 
 @pytest.mark.parametrize("cls", list(CASES), ids=lambda cls: cls.__name__)
+def test_hyperparameters_left_out_of_a_save_take_their_defaults(cls: type[BaseAlgorithm], tmp_path: Path) -> None:
+    # As in SB3, one left out by save(exclude=...) is the constructor's default after load(); the state built with the
+    # saved value (the strategy) takes it too: the model ran with the saved value while it showed the default
+    case = CASES[cls]
+    short = dict(max_episode_steps=20)
+    env = make_vec_env("Pendulum-v1", n_envs=2, seed=0, env_kwargs=short)
+    model = cls("MlpPolicy", env, seed=0, **case.kwargs)
+    model.learn(1)
+    names = sorted(case.applied)
+    model.save(tmp_path / "full.zip")
+    model.save(tmp_path / "part.zip", exclude=names)
+    defaults = {name: getattr(cls("MlpPolicy", env), name) for name in names}
+    assert defaults != {name: getattr(model, name) for name in names} or cls is CMAES  # CMAES's case: its defaults
+    runs, parameters = [], []
+    for path, kwargs in ((tmp_path / "part.zip", {}), (tmp_path / "full.zip", defaults)):
+        loaded = cls.load(path, env=make_vec_env("Pendulum-v1", n_envs=2, seed=1, env_kwargs=short), **kwargs)
+        assert {name: getattr(loaded, name) for name in names} == defaults
+        loaded.learn(1, reset_num_timesteps=False)
+        strategy = getattr(loaded, "strategy", None)
+        runs.append((loaded.num_timesteps, [getattr(strategy, name, None) for name in names]))
+        parameters.append(loaded.policy.parameters_to_vector())
+    assert runs[0] == runs[1]
+    np.testing.assert_array_equal(*parameters)
+
+
+@pytest.mark.parametrize("cls", list(CASES), ids=lambda cls: cls.__name__)
 def test_values_that_cannot_change_are_refused(cls: type[BaseAlgorithm], tmp_path: Path) -> None:
     path = saved(cls, tmp_path)
     ((key, value),) = CASES[cls].refused.items()
@@ -136,6 +162,10 @@ def test_values_that_cannot_change_are_refused(cls: type[BaseAlgorithm], tmp_pat
     assert saved_value != value
     model = cls.load(path, **{key: saved_value})
     assert type(model) is cls and getattr(model, key) == saved_value
+    # The same through custom_objects, which SB3 would set on the model beside a strategy built with the saved value
+    with pytest.raises(ValueError, match=rf"{cls.__name__}.load\({key}=.*cannot change {key} once it has trained"):
+        cls.load(path, custom_objects={key: value})
+    assert getattr(cls.load(path, custom_objects={key: saved_value}), key) == saved_value
 
 
 @pytest.mark.parametrize("cls", list(CASES), ids=lambda cls: cls.__name__)

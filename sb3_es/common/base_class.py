@@ -342,7 +342,8 @@ class ESBaseAlgorithm(BaseAlgorithm):
         :param env: Environment to continue training on (optional for ``predict()``).
         :param device: Torch device.
         :param custom_objects: Objects replacing saved ones, as in SB3 (e.g. to skip what cannot be deserialized).
-            A hyperparameter there that ``load()`` can change is applied as if given in ``kwargs`` (``kwargs`` wins).
+            A hyperparameter there is taken as if given in ``kwargs`` (``kwargs`` wins): applied, or refused where
+            ``load()`` cannot change it.
         :param print_system_info: Print the system info of the save and of this machine.
         :param force_reset: Reset the env before training.
         :param kwargs: Hyperparameters to change (constructor arguments or saved attributes); a new value is used
@@ -354,8 +355,10 @@ class ESBaseAlgorithm(BaseAlgorithm):
         # As SB3's load() rebuilds learning_rate's schedule from a replaced learning_rate, a hyperparameter replaced
         # here drives training: handled as a change, not left on the model beside a strategy that uses the saved one.
         # (Names of this class's own signature: a subclass whose __init__ takes **kwargs keeps SB3's replacement.)
+        # One that cannot change is refused as in kwargs (SB3 would set it on the model beside a strategy built with
+        # the saved value).
         changeable = cls._applicable_on_load() & cls._parameters()
-        replaced = {key: custom_objects.pop(key) for key in set(custom_objects) & changeable}
+        replaced = {key: custom_objects.pop(key) for key in set(custom_objects) & cls._parameters()}
         data, _ = check_save_file(path, cls, custom_objects)
         cls._check_save_data(path, data)
         signature = inspect.signature(cls.__init__).parameters
@@ -367,6 +370,10 @@ class ESBaseAlgorithm(BaseAlgorithm):
         if isinstance(device, str) and device == "auto":
             device = cls._auto_device
         model = super().load(path, env, device, custom_objects, print_system_info, force_reset, **kwargs)
+        # One left out of the save (save(exclude=[...])) is the constructor's default on the model, as in SB3: the
+        # state built with the saved value takes that default too, so that the model uses what it shows.
+        dropped = changeable - set(kwargs) - set(model._excluded_save_params())
+        changed |= {key: getattr(model, key) for key in dropped if key not in data and f"_{key}" not in data}
         model._apply_hyperparameters(changed)
         # The saved or changed settings against the env given (SB3 built the model with it before restoring them).
         model._check_env()
