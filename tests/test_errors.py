@@ -16,7 +16,8 @@ import numpy as np
 import pytest
 import torch as th
 from algorithms import ALGORITHMS, ALGOS, POPULATION_ALGORITHMS, Algo
-from envs import MultiDiscreteActionEnv
+from envs import MultiDiscreteActionEnv, SpaceEnv
+from gymnasium import spaces
 from gymnasium.wrappers import TimeLimit
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.policies import ActorCriticPolicy, BasePolicy
@@ -446,6 +447,16 @@ def test_reinforce_refuses_discretizing_discrete_actions(policy_kwargs: dict[str
 def test_reinforce_refuses_a_tuple_observation_space_at_construction() -> None:
     with pytest.raises(ValueError, match=r"Unsupported observation space Tuple\(.*FlattenObservation"):
         REINFORCE("MlpPolicy", gym.make("Blackjack-v1"))
+
+
+@pytest.mark.parametrize("algo", ALGORITHMS)
+@pytest.mark.parametrize("in_dict", [False, True], ids=["alone", "in-a-dict"])
+def test_a_multidiscrete_observation_with_a_2d_nvec_is_refused_by_name(algo: Algo, in_dict: bool) -> None:
+    # it failed with NumPy's "only 0-dimensional arrays can be converted to Python scalars"
+    space = spaces.MultiDiscrete(np.array([[2, 3], [2, 2]]))
+    env = SpaceEnv(spaces.Dict({"grid": space}) if in_dict else space, spaces.Box(-1, 1, (2,)))
+    with pytest.raises(ValueError, match=r"a MultiDiscrete with a 2-D nvec \(2, 2\); wrap the env with .*Flatten"):
+        algo.make(env, 2)
 
 
 # ---------------------------------------------------------------------------- schedules during training

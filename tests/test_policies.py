@@ -116,6 +116,27 @@ def test_population_actions_match_predict(case: str, with_obs_stats: bool) -> No
         assert np.unique(actions[:, 0]).size > 2  # not all saturated
 
 
+@pytest.mark.parametrize("net_arch", [[], dict(pi=[])])
+def test_layer_norm_without_hidden_layers_is_refused(net_arch: list | dict) -> None:
+    """An MLP without hidden layers has nothing for ``layer_norm`` to normalize: it was accepted and did nothing."""
+    with pytest.raises(ValueError, match=r"layer_norm=True with net_arch=.*Give hidden layers"):
+        MlpPolicy(OBS_BOX, ACT_BOX, net_arch=net_arch, layer_norm=True)
+    assert MlpPolicy(OBS_BOX, ACT_BOX, net_arch=net_arch).net_arch == []
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "named"),
+    [
+        (dict(layer_norm=True), "layer_norm=True"),  # it also named an activation_fn=ReLU never given
+        (dict(activation_fn=nn.Tanh), "activation_fn=Tanh"),
+        (dict(layer_norm=True, activation_fn=nn.Tanh), "layer_norm=True and activation_fn=Tanh"),
+    ],
+)
+def test_linear_policy_names_the_options_given_that_need_hidden_layers(kwargs: dict, named: str) -> None:
+    with pytest.raises(ValueError, match=rf"^LinearPolicy has no hidden layers, so {named} would do nothing"):
+        LinearPolicy(OBS_BOX, ACT_BOX, **kwargs)
+
+
 @pytest.mark.parametrize(
     "kwargs", [dict(layer_norm=True), dict(activation_fn=nn.Softmax)], ids=["layer_norm", "softmax"]
 )

@@ -81,6 +81,18 @@ def test_integer_box_levels_are_the_nearest_distinct_integers() -> None:
     assert policy.action_levels.tolist() == [[0, 3, 7, 10], [-2, -1, 1, 2]]  # truncation gave [-2, 0, 0, 2]
     with pytest.raises(ValueError, match=r"n_bins=6 levels do not fit .* at most high - low \+ 1 .* \(5\)"):
         DiscretizedPolicy(spaces.Box(-1, 1, (3,)), action_space, lambda _: 1e-3, n_bins=6)
+    # a constant dimension (low == high) has one action whatever n_bins: every n_bins was refused, naming 1
+    constant = spaces.Box(np.array([0, 0]), np.array([0, 4]), dtype=np.int64)
+    policy = DiscretizedPolicy(spaces.Box(-1, 1, (3,)), constant, lambda _: 1e-3, n_bins=3)
+    assert policy.action_levels.tolist() == [[0, 0, 0], [0, 2, 4]]
+    with pytest.raises(ValueError, match=r"n_bins=6 .* narrowest non-constant dimension \(5\)"):
+        DiscretizedPolicy(spaces.Box(-1, 1, (3,)), constant, lambda _: 1e-3, n_bins=6)
+
+
+def test_the_learning_rate_in_optimizer_kwargs_is_refused_by_name() -> None:
+    # it failed in torch: "Adam() got multiple values for keyword argument 'lr'"
+    with pytest.raises(ValueError, match=r"REINFORCE's learning_rate argument .* leave lr out of optimizer_kwargs"):
+        REINFORCE("MlpPolicy", "Pendulum-v1", policy_kwargs=dict(optimizer_kwargs=dict(lr=1e-3)))
 
 
 def test_factorized_discretization_and_actions_on_grid() -> None:

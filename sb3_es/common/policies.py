@@ -109,6 +109,12 @@ class FlatPolicy(BasePolicy):
                 f"build nothing. Give the policy's hidden layers only: net_arch=dict(pi={pi_arch}) or "
                 f"net_arch={pi_arch} (the default is [64, 64])."
             )
+        layer_norm = check_flag("layer_norm", layer_norm)
+        if layer_norm and pi_arch == []:
+            raise ValueError(
+                f"layer_norm=True with net_arch={net_arch!r}: a network without hidden layers has nothing to "
+                "normalize. Give hidden layers (e.g. net_arch=[64, 64]) or leave layer_norm=False."
+            )
         super().__init__(observation_space, action_space, squash_output=is_box and squash_output)
         self.obs_dim = obs_dim
         self.action_dim = action_dim
@@ -116,7 +122,7 @@ class FlatPolicy(BasePolicy):
         check_module_class("activation_fn", activation_fn, nn.Module, "torch.nn.Tanh")
         self.activation_fn = activation_fn
         self.with_bias = with_bias
-        self.layer_norm = check_flag("layer_norm", layer_norm)
+        self.layer_norm = layer_norm
         self.normalize_observations = check_flag("normalize_observations", normalize_observations)
         layers = create_mlp(
             obs_dim,
@@ -323,10 +329,13 @@ class LinearPolicy(FlatPolicy):
     ) -> None:
         if split_net_arch(net_arch)[0]:  # [] and SB3's dict(pi=[]) are the linear network
             raise ValueError(f"LinearPolicy has no hidden layers (got net_arch={net_arch}); use MlpPolicy instead.")
-        if layer_norm or activation_fn is not nn.ReLU:
+        given = [f"layer_norm={layer_norm!r}"] if layer_norm else []
+        if activation_fn is not nn.ReLU:
+            given.append(f"activation_fn={getattr(activation_fn, '__name__', activation_fn)}")
+        if given:
             raise ValueError(
-                f"LinearPolicy has no hidden layers, so layer_norm={layer_norm!r} and activation_fn="
-                f"{getattr(activation_fn, '__name__', activation_fn)} would do nothing: use MlpPolicy for them."
+                f"LinearPolicy has no hidden layers, so {' and '.join(given)} would do nothing: use MlpPolicy for "
+                "hidden layers."
             )
         super().__init__(
             observation_space,

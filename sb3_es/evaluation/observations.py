@@ -24,6 +24,13 @@ def flat_obs_dim(observation_space: spaces.Space) -> int:
         them (e.g. dm_control through shimmy). Discrete entries count one input per value (one-hot).
     :return: Number of scalars in one flattened observation.
     """
+    entries = observation_space.spaces.values() if isinstance(observation_space, spaces.Dict) else [observation_space]
+    for space in entries:
+        if isinstance(space, spaces.MultiDiscrete) and space.nvec.ndim > 1:  # SB3's one-hot takes a 1-D nvec only
+            raise ValueError(
+                f"Unsupported observation space {space}: a MultiDiscrete with a {space.nvec.ndim}-D nvec "
+                f"{space.nvec.shape}; wrap the env with gymnasium.wrappers.FlattenObservation (or give it a 1-D nvec)."
+            )
     if isinstance(observation_space, spaces.Dict):
         bad = {k: type(s).__name__ for k, s in observation_space.spaces.items() if not isinstance(s, FLAT_OBS_SPACES)}
         if bad:

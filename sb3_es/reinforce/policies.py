@@ -174,6 +174,11 @@ class DiscretizedPolicy(ActorCriticPolicy):
         arguments = base_arguments(super().__init__, locals())  # ActorCriticPolicy's own, as given
         arguments["net_arch"] = dict(pi=self.policy_net_arch, vf=value_arch)
         arguments["optimizer_kwargs"] = {} if optimizer_kwargs is None else optimizer_kwargs  # {}: no eps=1e-5
+        if "lr" in arguments["optimizer_kwargs"]:  # the optimizer gets it from the schedule (torch: "multiple values")
+            raise ValueError(
+                f"optimizer_kwargs={optimizer_kwargs!r}: the learning rate is REINFORCE's learning_rate argument "
+                "(a float or a schedule); leave lr out of optimizer_kwargs."
+            )
         super().__init__(**arguments)
         if isinstance(action_space, spaces.Box):
             low = action_space.low.reshape(-1).astype(np.float64)
@@ -182,11 +187,12 @@ class DiscretizedPolicy(ActorCriticPolicy):
             levels = np.linspace(low, high, self.n_bins, axis=1)
             if np.issubdtype(action_space.dtype, np.integer):  # the nearest integers, each level a distinct action
                 levels = np.rint(levels)
-                if np.any(np.diff(levels, axis=1) == 0):
+                varying = high > low  # a constant dimension (low == high) has one action, whatever n_bins
+                if np.any(np.diff(levels[varying], axis=1) == 0):
                     raise ValueError(
                         f"n_bins={self.n_bins} levels do not fit in the integer action space {action_space}: two "
                         "levels round to the same action. Use n_bins at most high - low + 1 of its narrowest "
-                        f"dimension ({int(np.min(high - low)) + 1})."
+                        f"non-constant dimension ({int(np.min((high - low)[varying])) + 1})."
                     )
             levels = levels.astype(action_space.dtype)
         else:
