@@ -6,6 +6,7 @@ Examples::
 
     python benchmarks/headline.py --seeds 0 1 2                       # the defaults, three seeds
     python benchmarks/headline.py --seeds 0 --steps 1e6 3e6 --set reward_clip=[-1,1]   # a variation
+    python benchmarks/headline.py --algo PPO --seeds 0 1 2            # the same line with SB3's PPO
 
 Prints one line per seed and budget, and the median at each budget; writes ``<out>/headline.json`` after every seed.
 """
@@ -23,12 +24,14 @@ import gymnasium as gym
 import numpy as np
 import torch
 from common import algorithm_classes, read_value, selection_problems, source_commit, step_count, system_info
+from sb3_contrib import ARS as ContribARS
+from stable_baselines3 import PPO
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.evaluation import evaluate_policy
 
-#: ``--algo`` choices: sb3-es's algorithm classes by name.
-ALGORITHMS: dict[str, type[BaseAlgorithm]] = algorithm_classes(BaseAlgorithm)
+#: ``--algo`` choices: sb3-es's algorithm classes by name, and for comparison SB3's PPO and sb3-contrib's ARS.
+ALGORITHMS: dict[str, type[BaseAlgorithm]] = {**algorithm_classes(BaseAlgorithm), "PPO": PPO, "contrib.ARS": ContribARS}
 #: Constructor arguments that ``--set`` may not give: the script's own flags set them.
 OWN_FLAGS = {"policy": "--policy", "env": "--env", "seed": "--seeds"}
 
@@ -109,7 +112,9 @@ def main(argv: list[str] | None = None) -> None:
     :param argv: Arguments (defaults to ``sys.argv[1:]``).
     """
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--algo", choices=sorted(ALGORITHMS), default="ARS", help="an sb3-es algorithm class")
+    parser.add_argument(
+        "--algo", choices=sorted(ALGORITHMS), default="ARS", help="an sb3-es algorithm class, PPO or contrib.ARS"
+    )
     parser.add_argument("--policy", default="MlpPolicy")
     parser.add_argument("--env", default="BipedalWalker-v3")
     parser.add_argument("--steps", nargs="+", type=step_count, default=[1_000_000], help="budgets at which to evaluate")

@@ -103,3 +103,18 @@ def test_headline_records_the_commit_of_the_sb3_es_it_ran(tmp_path: Path, monkey
     record = json.loads((tmp_path / "headline.json").read_text())
     assert record["commit"] == load_registered("common").source_commit()
     assert record["kwargs"] == {"n_delta": 1, "n_top": 1} and record["runs"][0]["env_steps"] >= 100
+
+
+@pytest.mark.parametrize(
+    ("algo", "settings"), [("PPO", ["n_steps=64", "batch_size=32"]), ("contrib.ARS", ["n_delta=1"])]
+)
+def test_headline_runs_the_line_with_ppo_and_sb3_contribs_ars(algo: str, settings: list[str], tmp_path: Path) -> None:
+    """The same measurement with SB3's PPO and sb3-contrib's ARS, to compare the defaults at one budget."""
+    argv = ["--algo", algo, "--env", "CartPole-v1", "--steps", "64", "--seeds", "0", "--episodes", "1"]
+    threads = torch.get_num_threads()
+    try:
+        load_registered("headline").main([*argv, "--set", *settings, "--out", str(tmp_path)])
+    finally:
+        torch.set_num_threads(threads)
+    record = json.loads((tmp_path / "headline.json").read_text())
+    assert record["args"]["algo"] == algo and record["runs"][0]["env_steps"] >= 64
