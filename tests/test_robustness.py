@@ -348,6 +348,8 @@ class LocalsReader(BaseCallback):
         rewards, new_obs, actions = self.locals["rewards"], self.locals["new_obs"], self.locals["actions"]
         dones, infos = self.locals["dones"], self.locals["infos"]
         assert np.shape(rewards) == (n_envs,) and np.shape(new_obs) == (n_envs, 2)
+        np.testing.assert_array_equal(self.locals["clipped_actions"], actions)  # PPO's name for what the env took
+        assert self.locals["iteration"] >= 0  # as PPO's learn() has it
         actions = np.asarray(actions, dtype=np.float64).reshape(n_envs)
         if self.obs is None:
             self.returns = np.zeros(n_envs)
@@ -374,6 +376,8 @@ def test_callbacks_see_rewards_new_obs_and_actions(algo: Algo) -> None:
     model.learn(100, callback=reader)
     assert reader.calls * 3 == model.num_timesteps
     assert reader.checked_episodes >= 4
+    # at most 0 after learn(), as PPO's (it stayed at the last generation's start: 0.26 for ARS)
+    assert model._current_progress_remaining <= 0
 
 
 def test_never_ending_env_is_registered_without_limit() -> None:

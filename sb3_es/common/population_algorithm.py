@@ -254,11 +254,11 @@ class PopulationAlgorithm(StrategyAlgorithm):
         total_timesteps, callback = self._setup_learn(
             total_timesteps, callback, reset_num_timesteps, tb_log_name, progress_bar
         )
+        iteration = 0  # generations of this learn() call, as SB3's on-policy algorithms count them
         callback.on_training_start(locals(), globals())
         self._stop_training = False
         if self.verbose >= 1:
             print(self._generation_size_message(total_timesteps))
-        iteration = 0  # generations of this learn() call, as SB3's on-policy algorithms count them
         while self.num_timesteps < total_timesteps and not self._stop_training:
             self._update_current_progress_remaining(self.num_timesteps, total_timesteps)
             if not self._run_generation(evaluator, callback):
@@ -268,6 +268,7 @@ class PopulationAlgorithm(StrategyAlgorithm):
             iteration += 1
             if log_interval is not None and iteration % log_interval == 0:
                 self.dump_logs(iteration)
+        self._update_current_progress_remaining(self.num_timesteps, total_timesteps)  # as PPO's: 0 (or less) at the end
         callback.on_training_end()
         return self
 
@@ -320,6 +321,7 @@ class PopulationAlgorithm(StrategyAlgorithm):
                     "rewards": rewards,
                     "new_obs": new_obs,
                     "actions": actions,
+                    "clipped_actions": actions,  # PPO's name for what the env took, which actions already is
                 }
             )
             if not callback.on_step():

@@ -290,6 +290,7 @@ class REINFORCE(ESBaseAlgorithm):
                 indices = self.policy(obs_as_tensor(obs, self.device), generator=generator)  # type: ignore[arg-type]
                 actions = self.policy.indices_to_actions(indices).cpu().numpy()
             actions = actions.reshape((n_envs, *self.action_space.shape))  # type: ignore[misc]
+            clipped_actions = actions  # noqa: F841  (PPO's local for what the env took: the levels lie in the bounds)
             new_obs, rewards, dones, infos = env.step(actions)
             end_capped_episodes(env, max_steps, episodes.ep_length + 1, new_obs, dones, infos)  # type: ignore[arg-type]
             self.num_timesteps += n_envs
