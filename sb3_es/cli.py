@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import argparse
 import os
+import shlex
+import shutil
 import sys
 import time
 from collections.abc import Sequence
@@ -39,6 +41,18 @@ FORMER_FLAGS: dict[str, str] = {
 }
 
 
+def shell_command(name: str) -> str:
+    """
+    :param name: A console script installed with this Python (``sb3-es``, ``tensorboard``).
+    :return: How to run it from this shell: its name when ``PATH`` finds it, else its path beside this Python (the
+        venv's ``bin/``, as after ``make train``), quoted for a POSIX shell.
+    """
+    beside = os.path.join(os.path.dirname(sys.executable), name)
+    if shutil.which(name) or not os.path.exists(beside):
+        return name
+    return shlex.quote(os.path.relpath(beside))
+
+
 def quickstart(timesteps: int, log_folder: str, seed: int | None) -> tuple[ARS, str, str, float, float]:
     """
     Train :data:`QUICKSTART`, evaluate before and after, save the model, print where the logs and model are.
@@ -67,12 +81,14 @@ def quickstart(timesteps: int, log_folder: str, seed: int | None) -> tuple[ARS, 
     model.save(model_path)
     env.close()
     eval_env.close()
+    folder = shlex.quote(log_folder)
     print(
         f"\nTrained ARS on {env_id} for {model.num_timesteps} env steps in {elapsed:.0f} s\n"
         f"  mean return over {n_eval_episodes} episodes: {before:.1f} before -> {after:.1f} after\n"
-        f"  TensorBoard logs: {os.path.abspath(run_dir)}   (view: tensorboard --logdir {log_folder})\n"
+        f"  TensorBoard logs: {os.path.abspath(run_dir)}   (view: {shell_command('tensorboard')} --logdir {folder})\n"
         f"  Saved model:      {os.path.abspath(model_path)}   (load: ARS.load(path))\n"
-        f"  Next: sb3-es train --algo ars_es --env {env_id} -tb {log_folder}   (rl-zoo's flags, sb3-es's configs)"
+        f"  Next: {shell_command('sb3-es')} train --algo ars_es --env {env_id} -tb {folder}   (rl-zoo's flags, "
+        "sb3-es's configs)"
     )
     return model, run_dir, model_path, before, after  # type: ignore[return-value]
 
@@ -93,7 +109,7 @@ def check_former_flags(args: Sequence[str]) -> None:
         if arg == "--hyperparams" and i + 1 < len(args):
             value = args[i + 1]
         if value is not None and value.lstrip().startswith("{"):
-            hints.append("--hyperparams '{\"key\": value}' -> -params key:value ...")
+            hints.append("--hyperparams '{\"key\": value}' -> -params key:value [key:value ...]")
     if hints:
         raise SystemExit(
             "sb3-es now takes rl-zoo's flags (python -m rl_zoo3.train --help lists them): " + "; ".join(hints) + "."
@@ -121,12 +137,15 @@ def main(argv: Sequence[str] | None = None) -> None:
         return
     if args[:1] == ["train"]:  # the former command's flags (enjoy and the others take --n-envs, as in rl-zoo)
         check_former_flags(args[1:])
-    try:
-        from sb3_es.zoo.commands import main as zoo_main
-    except ImportError as e:
-        raise SystemExit(f"sb3-es {' '.join(args[:1])}: {e}\n(sb3-es quickstart works without it.)") from e
     if not args or args[0] in ("-h", "--help"):
         print("usage: sb3-es quickstart [-n N] [-f FOLDER] [--seed S]\n       sb3-es COMMAND [rl-zoo arguments]\n")
+    try:
+        from sb3_es.zoo.commands import SCRIPTS
+        from sb3_es.zoo.commands import main as zoo_main
+    except ImportError as e:
+        raise SystemExit(f"sb3-es {args[0] if args else '--help'}: {e}\n(sb3-es quickstart works without it.)") from e
+    if args and not args[0].startswith("-") and args[0] not in SCRIPTS:
+        raise SystemExit(f"Unknown command {args[0]!r}: use quickstart or one of {', '.join(SCRIPTS)}.")
     zoo_main(args)
 
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import shlex
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -85,18 +87,23 @@ def test_quickstart_refuses_a_budget_below_one(capsys: pytest.CaptureFixture[str
     assert "-n -5: give a positive number of env steps" in capsys.readouterr().err
 
 
-def test_abbreviated_and_attached_options_are_read_as_rl_zoo_reads_them() -> None:
+def test_abbreviated_and_attached_options_are_read_as_rl_zoo_reads_them(tmp_path: Path) -> None:
     from sb3_es.zoo.commands import prepare_args
 
     args = prepare_args("train", ["--alg", "ars_es", "--env", "CartPole-v1"])
     assert args[-2] == "--conf-file" and args[-1].endswith("ars_es.yml")  # the packaged file, as with --algo
-    assert prepare_args("enjoy", ["--algo", "ars_es", "--env", "CartPole-v1", "-f/tmp/logs"])[-1] == "-f/tmp/logs"
+    (tmp_path / "ars_es").mkdir()
+    assert prepare_args("enjoy", ["--algo", "ars_es", "--env", "CartPole-v1", f"-f{tmp_path}"])[-1] == f"-f{tmp_path}"
+    with pytest.raises(UsageError, match=rf"no folder {tmp_path}/x/ars_es \(-f {tmp_path}/x\)"):  # -fPATH read too
+        prepare_args("enjoy", ["--algo", "ars_es", "--env", "CartPole-v1", f"-f{tmp_path}/x"])
     with pytest.raises(UsageError, match="--algo ars is sb3-contrib's ARS"):
         prepare_args("train", ["--alg", "ars", "--env", "CartPole-v1"])
     # rl-zoo's single-dash long options are abbreviated too: the user's file is kept
-    assert prepare_args("train", ["--algo", "ars_es", "--env", "Pendulum-v1", "-con", "mine.yml"])[-2:] == [
+    mine = tmp_path / "mine.yml"
+    mine.write_text("Pendulum-v1:\n  n_timesteps: 1000\n  policy: 'LinearPolicy'\n")
+    assert prepare_args("train", ["--algo", "ars_es", "--env", "Pendulum-v1", "-con", str(mine)])[-2:] == [
         "-con",
-        "mine.yml",
+        str(mine),
     ]
 
 
@@ -111,8 +118,9 @@ def test_trial_id_0_is_refused_and_a_trial_id_is_said(capsys: pytest.CaptureFixt
         assert "CONVERTERS['openes'](optuna.load_study(study_name='s', storage='sqlite:///s.db')" in str(info.value)
     with pytest.raises(UsageError, match=r"--trial-id 3 needs --storage and --study-name: without both, rl-zoo"):
         prepare_args("train", ["--algo", "openes", "--env", "CartPole-v1", "--trial-id", "3", *study[:2]])
-    prepare_args("train", ["--algo", "openes", "--env", "CartPole-v1", *study, "--trial-id=3"])
-    assert "the values of trial 3 of the study replace the file's" in capsys.readouterr().out
+    with pytest.raises(UsageError, match=r"--storage sqlite:///s.db: there is no file s.db, so no study 's'"):
+        prepare_args("train", ["--algo", "openes", "--env", "CartPole-v1", *study, "--trial-id=3"])
+    # with the study there, the line naming the trial's values: tests/test_zoo.py
 
 
 def test_a_pgpe_search_with_another_optimizer_than_clipup_is_refused() -> None:
@@ -123,3 +131,35 @@ def test_a_pgpe_search_with_another_optimizer_than_clipup_is_refused() -> None:
     with pytest.raises(UsageError, match=r"-optimize samples PGPE's ClipUp max_speed, which optimizer='adam' does"):
         prepare_args("train", [*search, "center_learning_rate:0.01"])
     prepare_args("train", search[:-3])  # the entry's ClipUp
+
+
+def test_quickstart_prints_commands_that_run_from_this_shell(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # after `make train` the venv's bin/ is not on PATH: "sb3-es train ..." was "command not found"; a folder with a
+    # space broke both printed commands
+    folder = tmp_path / "q s"
+    monkeypatch.setenv("PATH", "/nonexistent")
+    main(["quickstart", "-n", "2000", "-f", str(folder)])
+    out = capsys.readouterr().out
+    next_line = next(line for line in out.splitlines() if "Next:" in line)
+    command = next_line.split("Next: ", 1)[1].split(" train ", 1)[0]
+    assert command != "sb3-es" and Path(shlex.split(command)[0]).name == "sb3-es"
+    assert Path(shlex.split(command)[0]).resolve() == (Path(sys.executable).parent / "sb3-es").resolve()
+    assert f"-tb {shlex.quote(str(folder))}" in next_line and f"--logdir {shlex.quote(str(folder))})" in out
+
+
+def test_an_unknown_command_names_quickstart_too() -> None:
+    with pytest.raises(SystemExit, match=r"Unknown command 'bogus': use quickstart or one of train, enjoy"):
+        main(["bogus"])
+
+
+def test_help_shows_the_quickstart_usage_even_without_rl_zoo(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    for name in [name for name in sys.modules if name.startswith(("sb3_es.zoo", "rl_zoo3"))]:
+        monkeypatch.delitem(sys.modules, name)
+    monkeypatch.setitem(sys.modules, "rl_zoo3", None)  # not installed
+    with pytest.raises(SystemExit, match=r"^sb3-es --help: .*pip install -c constraints.txt -e '.\[zoo\]'"):
+        main(["--help"])
+    assert capsys.readouterr().out.startswith("usage: sb3-es quickstart")

@@ -357,12 +357,30 @@ def test_trial_id_line_shows_the_values_rl_zoo_trains_with(tmp_path: Path, capsy
     assert "population_size=6" in line
     with pytest.raises(UsageError, match=r"--trial-id 5: cannot load that trial of study 's' .*IndexError"):
         prepare_args("train", [*train[:-1], "5"])
-    # a storage file not there yet is not created (opening it would): the line says what the trial replaces
+    # a storage file that is not there is refused and not created (opening it would; rl-zoo then failed with a
+    # KeyError traceback)
     missing = f"sqlite:///{tmp_path / 'none.db'}"
-    prepare_args("train", [*train[:4], "--storage", missing, *train[6:]])
-    out = capsys.readouterr().out
-    assert "-params and -n applied; trial 1's values replace those it sets)" in out
+    with pytest.raises(UsageError, match=rf"--storage {missing}: there is no file .*none.db, so no study 's'"):
+        prepare_args("train", [*train[:4], "--storage", missing, *train[6:]])
     assert not (tmp_path / "none.db").exists()
+
+
+def test_missing_files_and_folders_are_said_before_rl_zoo_runs(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    # rl-zoo: a FileNotFoundError and an AssertionError traceback
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(UsageError, match=r"--conf-file /nonexistent.yml: no such file"):
+        prepare_args("train", ["--algo", "ars_es", "--env", "Pendulum-v1", "-conf", "/nonexistent.yml"])
+    for command in ("enjoy", "record_video", "record_training"):
+        with pytest.raises(UsageError, match=rf"{command}: no folder logs/ars_es \(-f logs\): train first"):
+            prepare_args(command, ["--algo", "ars_es", "--env", "Swimmer-v5"])
+    (tmp_path / "runs" / "ars_es").mkdir(parents=True)
+    assert prepare_args("enjoy", ["--algo", "ars_es", "--env", "Swimmer-v5", "-f", "runs"])[-2:] == ["-f", "runs"]
+
+
+def test_push_to_hub_that_rl_zoo_cannot_import_says_so_in_one_line(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setitem(sys.modules, "rl_zoo3.push_to_hub", None)  # as with rl-zoo3 2.9.2 and huggingface_sb3 3.2
+    with pytest.raises(SystemExit, match=r"^push_to_hub: rl-zoo's script cannot be imported .*PPO included"):
+        zoo("push_to_hub", "-h")
 
 
 @pytest.mark.parametrize("command", ["train", "enjoy", "record_video", "push_to_hub", "load_from_hub"])
@@ -479,7 +497,12 @@ def test_entries_build_models(algo: str, env_id: str, tmp_path: Path) -> None:
         model.get_env().close()  # type: ignore[union-attr]
 
 
-def test_default_fallback_is_logged(capsys: pytest.CaptureFixture[str]) -> None:
+def test_default_fallback_is_logged(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.chdir(tmp_path)
+    for folder in ("logs", "x"):
+        (tmp_path / folder / "cmaes").mkdir(parents=True)  # what enjoy loads from (missing: refused)
     args = prepare_args("train", ["--algo", "openes", "--env", "CartPole-v1"])
     assert args[-2:] == ["--conf-file", str(HYPERPARAMS_DIR / "openes.yml")]
     out = capsys.readouterr().out

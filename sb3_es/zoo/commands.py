@@ -61,7 +61,7 @@ examples:
 
 def _option_value(args: Sequence[str], names: Sequence[str], default: str) -> str:
     """
-    Value of an option in an argument list (``--name value`` or ``--name=value``), the last one winning.
+    Value of an option in an argument list (``--name value``, ``--name=value``, ``-fVALUE``), the last one winning.
 
     :param args: Command-line arguments.
     :param names: The option's spellings, e.g. ``("--algo",)``.
@@ -71,7 +71,9 @@ def _option_value(args: Sequence[str], names: Sequence[str], default: str) -> st
     value = default
     for i, arg in enumerate(args):
         flag, sep, inline = arg.partition("=")
-        if _spells(flag, names):
+        if any(len(n) == 2 and len(arg) > 2 and arg.startswith(n) and arg[1] != "-" for n in names):  # -f/path
+            value = arg[2:]
+        elif _spells(flag, names):
             if sep:
                 value = inline
             elif i + 1 < len(args):
@@ -167,12 +169,15 @@ def trial_hyperparams(algo: str, storage: str, study_name: str, trial_id: int) -
 
 def _stored_trial(algo: str, storage: str, study_name: str, trial_id: int) -> dict[str, Any]:
     """
-    :return: :func:`trial_hyperparams`, or ``{}`` when ``storage`` is a file (SQLite URL, ``.log``) not yet there:
-        opening it would create it (rl-zoo then fails on the missing study, naming it).
+    :return: :func:`trial_hyperparams`; a storage file (SQLite URL, ``.log``) that is not there is refused before
+        anything opens it (that would create it; rl-zoo then failed on the empty study with a KeyError).
     """
     path = storage.removeprefix("sqlite:///") if storage.startswith("sqlite:///") or storage.endswith(".log") else ""
     if path and not Path(path).is_file():
-        return {}
+        raise UsageError(
+            f"--storage {storage}: there is no file {path}, so no study {study_name!r} to take trial {trial_id} "
+            "from. Give the storage of the -optimize run (its --storage)."
+        )
     try:
         return trial_hyperparams(algo, storage, study_name, trial_id)
     except (KeyError, IndexError, ValueError) as e:
@@ -374,7 +379,9 @@ def prepare_args(command: str, args: Sequence[str]) -> list[str]:
         if trial_id is not None:
             values = f": {', '.join(f'{k}={v}' for k, v in trial.items())}" if trial else " (and -params replaces them)"
             print(f"sb3-es: {algo} on {env_id}: the values of trial {trial_id} of the study replace the file's{values}")
-        if conf.endswith((".yml", ".yaml")) and Path(conf).is_file():
+        if conf.endswith((".yml", ".yaml")) and not Path(conf).is_file():
+            raise UsageError(f"--conf-file {conf}: no such file.")
+        if conf.endswith((".yml", ".yaml")):
             key, entry = config_entry(conf, env_id)
             if key is None:
                 raise UsageError(
@@ -411,8 +418,16 @@ def prepare_args(command: str, args: Sequence[str]) -> list[str]:
                 )
             elif key is not None:
                 print(f"sb3-es: {algo} on {env_id}: hyperparameters from the {env_id} entry of {conf}")
-    if command in LOGS_DEFAULT_COMMANDS and not _has_option(args, "-f", "--folder"):
-        args += ["-f", "logs"]
+    if command in LOGS_DEFAULT_COMMANDS:
+        if not _has_option(args, "-f", "--folder"):
+            args += ["-f", "logs"]
+        folder = Path(_option_value(args, ("-f", "--folder"), "logs")) / algo
+        # rl-zoo: an AssertionError traceback (but for its rl-trained-agents folder, which it downloads)
+        if not folder.is_dir() and "rl-trained-agents" not in str(folder):
+            raise UsageError(
+                f"{command}: no folder {folder} (-f {folder.parent}): train first (sb3-es train --algo {algo} "
+                f"--env ENV -f {folder.parent}), or give the folder that holds {algo}/ with -f."
+            )
     return args
 
 
@@ -473,6 +488,14 @@ def run(command: str, args: Sequence[str]) -> None:
         raise UsageError(f"Unknown command {command!r}: use one of {', '.join(SCRIPTS)}.")
     register()
     args = prepare_args(command, args)
+    if command == "push_to_hub":
+        try:
+            importlib.import_module(SCRIPTS[command].partition(":")[0])
+        except ImportError as e:  # rl-zoo 2.9's push_to_hub imports a function huggingface_sb3 no longer has
+            raise UsageError(
+                f"push_to_hub: rl-zoo's script cannot be imported ({e}): a known mismatch of rl-zoo3 and "
+                "huggingface_sb3 versions, for every algorithm, PPO included (docs/guide/zoo.md, Share)."
+            ) from e
     paths = _subprocess_path() if command == "record_training" else contextlib.nullcontext()
     module, _, function = SCRIPTS[command].partition(":")
     with _argv([f"sb3_es.zoo {command}", *args]), paths:

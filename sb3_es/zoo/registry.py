@@ -22,7 +22,10 @@ try:
     import rl_zoo3
     import rl_zoo3.hyperparams_opt
 except ImportError as e:  # pragma: no cover - exercised only without the extra
-    raise ImportError("sb3_es.zoo needs rl-baselines3-zoo: pip install 'sb3-es[zoo]' (or pip install rl_zoo3).") from e
+    raise ImportError(
+        "sb3_es.zoo needs rl-baselines3-zoo, the [zoo] extra: in the sb3-es checkout, pip install -c constraints.txt "
+        "-e '.[zoo]' (docs/guide/install.md)."
+    ) from e
 import yaml
 from stable_baselines3.common.base_class import BaseAlgorithm
 
