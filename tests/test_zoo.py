@@ -1038,3 +1038,12 @@ def test_lin_strings_are_linear_schedules(algo: str, name: str) -> None:
     model = ALGOS[algo](policy, "Pendulum-v1", **{name: "lin_0.1"})
     schedule = getattr(model, name)
     assert callable(schedule) and schedule(1.0) == pytest.approx(0.1) and schedule(0.25) == pytest.approx(0.025)
+
+
+@pytest.mark.parametrize("value", ["abc", "1 +"])
+def test_a_params_value_that_is_not_python_is_said_in_one_line(value: str) -> None:
+    # rl-zoo evaluates each value: a NameError or SyntaxError traceback
+    with pytest.raises(
+        UsageError, match=r"^train: a key:value's value is not a Python expression \((Name|Syntax)Error"
+    ):
+        prepare_args("train", ["--algo", "ars_es", "--env", "Pendulum-v1", "-params", f"n_delta:{value}"])

@@ -144,6 +144,11 @@ def zoo_arguments(command: str, args: Sequence[str]) -> argparse.Namespace:
             script()
     except _Parsed as parsed:
         return parsed.namespace
+    except (NameError, SyntaxError) as e:  # rl-zoo's StoreDict evaluates each key:value's value as Python
+        raise UsageError(
+            f"{command}: a key:value's value is not a Python expression ({type(e).__name__}: {e}); rl-zoo evaluates "
+            "each one: write a string quoted twice, e.g. -params policy:\"'LinearPolicy'\"."
+        ) from e
     finally:
         setattr(argparse.ArgumentParser, "parse_args", parse_args)  # noqa: B010 (the original method back)
     raise RuntimeError(f"{SCRIPTS[command]} returned without parsing its arguments.")
