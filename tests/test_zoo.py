@@ -373,6 +373,7 @@ def test_missing_files_and_folders_are_said_before_rl_zoo_runs(tmp_path: Path, m
     for command in ("enjoy", "record_video", "record_training"):
         with pytest.raises(UsageError, match=rf"{command}: no folder logs/ars_es \(-f logs\): train first"):
             prepare_args(command, ["--algo", "ars_es", "--env", "Swimmer-v5"])
+    assert prepare_args("enjoy", ["--algo", "ars_es", "--env", "Swimmer-v5", "-h"])[-2:] == ["-f", "logs"]  # help
     (tmp_path / "runs" / "ars_es").mkdir(parents=True)
     assert prepare_args("enjoy", ["--algo", "ars_es", "--env", "Swimmer-v5", "-f", "runs"])[-2:] == ["-f", "runs"]
 

@@ -427,8 +427,9 @@ def prepare_args(command: str, args: Sequence[str]) -> list[str]:
         if not _has_option(args, "-f", "--folder"):
             args += ["-f", "logs"]
         folder = Path(_option_value(args, ("-f", "--folder"), "logs")) / algo
-        # rl-zoo: an AssertionError traceback (but for its rl-trained-agents folder, which it downloads)
-        if not folder.is_dir() and "rl-trained-agents" not in str(folder):
+        # rl-zoo: an AssertionError traceback (but for its rl-trained-agents folder, which it downloads; -h asks only)
+        asks_help = any(arg in ("-h", "--help") for arg in args)
+        if not folder.is_dir() and "rl-trained-agents" not in str(folder) and not asks_help:
             raise UsageError(
                 f"{command}: no folder {folder} (-f {folder.parent}): train first (sb3-es train --algo {algo} "
                 f"--env ENV -f {folder.parent}), or give the folder that holds {algo}/ with -f."
