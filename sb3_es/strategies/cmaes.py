@@ -210,16 +210,20 @@ class CMAESStrategy(Strategy):
         # global random state; a module-level function always reads the current (private, swapped-in) state.
         options = {"popsize": popsize, "CMA_diagonal": self.diagonal, "verbose": -9, "randn": _global_randn}
         options.update(self.cma_options)
-        given = self.cma_options.get("maxfevals")
-        user = parse_number(given) if isinstance(given, str) else given
-        if user is not None:  # counted over every run, as in pycma's fmin: what the earlier runs left
-            options["maxfevals"] = max(1, int(user) - sum(self._budget.values()))
+        maxfevals = self._user_number("maxfevals")
+        if maxfevals is not None:  # counted over every run, as in pycma's fmin: what the earlier runs left
+            options["maxfevals"] = max(1, int(maxfevals) - sum(self._budget.values()))
         if maxiter is not None:  # a BIPOP small-population run's cap, below the user's own
-            given = self.cma_options.get("maxiter")
-            user = parse_number(given) if isinstance(given, str) else given  # None: a pycma expression, left out
+            user = self._user_number("maxiter")
             options["maxiter"] = maxiter if user is None else min(maxiter, int(user))
         with self._private_random():
             return _import_cma().CMAEvolutionStrategy(x0, sigma0, options)
+
+    def _user_number(self, name: str) -> float | None:
+        """:return: The number given for a pycma option in ``cma_options``, or ``None`` (not given, or a pycma
+        expression such as ``"100 * N"``, left to pycma)."""
+        given = self.cma_options.get(name)
+        return parse_number(given) if isinstance(given, str) else given
 
     @property
     def min_population_size(self) -> int:

@@ -71,7 +71,7 @@ def _option_value(args: Sequence[str], names: Sequence[str], default: str) -> st
     value = default
     for i, arg in enumerate(args):
         flag, sep, inline = arg.partition("=")
-        if any(len(n) == 2 and len(arg) > 2 and arg.startswith(n) and arg[1] != "-" for n in names):  # -f/path
+        if any(_attached(arg, name) for name in names):  # -f/path
             value = arg[2:]
         elif _spells(flag, names):
             if sep:
@@ -90,12 +90,12 @@ def _has_option(args: Sequence[str], short: str, long: str) -> bool:
     :param long: Long form (e.g. ``"--conf-file"``).
     :return: True if given.
     """
-    for arg in args:
-        flag = arg.split("=", 1)[0]
-        attached = len(short) == 2 and arg.startswith(short) and not arg.startswith("--")  # -f/path
-        if attached or _spells(flag, (short, long)):
-            return True
-    return False
+    return any(_attached(arg, short) or _spells(arg.split("=", 1)[0], (short, long)) for arg in args)
+
+
+def _attached(arg: str, name: str) -> bool:
+    """:return: Whether ``arg`` is the two-character option ``name`` with its value attached (``-f/path``)."""
+    return len(name) == 2 and len(arg) > 2 and arg.startswith(name) and arg[1] != "-"
 
 
 def _spells(flag: str, names: Sequence[str]) -> bool:
