@@ -137,8 +137,11 @@ def main(argv: Sequence[str] | None = None) -> None:
         return
     if args[:1] == ["train"]:  # the former command's flags (enjoy and the others take --n-envs, as in rl-zoo)
         check_former_flags(args[1:])
-    if not args or args[0] in ("-h", "--help"):
-        print("usage: sb3-es quickstart [-n N] [-f FOLDER] [--seed S]\n       sb3-es COMMAND [rl-zoo arguments]\n")
+    if not args or args[0] in ("-h", "--help"):  # with no command, all of the usage goes to stderr (exit status 2)
+        print(
+            "usage: sb3-es quickstart [-n N] [-f FOLDER] [--seed S]\n       sb3-es COMMAND [rl-zoo arguments]\n",
+            file=sys.stderr if not args else sys.stdout,
+        )
     try:
         from sb3_es.zoo.commands import SCRIPTS
         from sb3_es.zoo.commands import main as zoo_main

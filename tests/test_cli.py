@@ -163,3 +163,15 @@ def test_help_shows_the_quickstart_usage_even_without_rl_zoo(
     with pytest.raises(SystemExit, match=r"^sb3-es --help: .*pip install -c constraints.txt -e '.\[zoo\]'"):
         main(["--help"])
     assert capsys.readouterr().out.startswith("usage: sb3-es quickstart")
+
+
+def test_no_command_is_a_usage_error_and_help_is_not(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as exited:  # as argparse does with a missing command: usage on stderr, status 2
+        main([])
+    assert exited.value.code == 2
+    captured = capsys.readouterr()
+    assert captured.out == ""
+    assert captured.err.startswith("usage: sb3-es quickstart") and "python -m sb3_es.zoo COMMAND" in captured.err
+    main(["--help"])
+    captured = capsys.readouterr()
+    assert captured.err == "" and "python -m sb3_es.zoo COMMAND" in captured.out

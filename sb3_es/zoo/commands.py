@@ -520,9 +520,12 @@ def main(argv: Sequence[str] | None = None) -> None:
     :param argv: Arguments after the program name (defaults to ``sys.argv[1:]``).
     """
     args = list(sys.argv[1:] if argv is None else argv)
-    if not args or args[0] in ("-h", "--help"):
+    if args[:1] in (["-h"], ["--help"]):
         print(USAGE)
         return
+    if not args:  # a usage error, as argparse treats a missing command (exit status 2)
+        print(USAGE, file=sys.stderr)
+        raise SystemExit(2)
     try:
         run(args[0], args[1:])
     except UsageError as e:
