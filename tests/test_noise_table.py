@@ -70,3 +70,15 @@ def test_bad_noise_table_size() -> None:
     # CartPole's linear policy has 4 x 2 parameters: a 10-value table has 3 slices for 8 directions
     with pytest.raises(ValueError, match=r"holds 3 distinct perturbations of 8 parameters, fewer than the 8"):
         ARS("LinearPolicy", "CartPole-v1", n_delta=8, noise_table_size=10).learn(100)
+
+
+@pytest.mark.parametrize("algo", NOISE_TABLE_ALGORITHMS)
+def test_a_table_too_small_for_a_generation_is_refused_by_the_constructor(algo: Algo, tmp_path: Path) -> None:
+    # CartPole's linear policy has 8 parameters: a 10-value table has 3 slices, fewer than a generation of 16 draws
+    with pytest.raises(ValueError, match=r"holds 3 distinct perturbations of 8 parameters, fewer than the \d+"):
+        algo.make("CartPole-v1", 16, noise_table_size=10, tensorboard_log=str(tmp_path))
+    assert not list(tmp_path.iterdir())  # refused before any run folder was made
+    # and by load(), where new hyperparameters would draw more slices than the table holds
+    algo.make("CartPole-v1", 2, noise_table_size=10).save(tmp_path / "model.zip")
+    with pytest.raises(ValueError, match=r"holds 3 distinct perturbations of 8 parameters, fewer than the \d+"):
+        algo.cls.load(tmp_path / "model.zip", **algo.size(16))

@@ -54,6 +54,10 @@ def test_shaping_order_terminal_then_clip_then_offset() -> None:
         (dict(terminal_reward=float("nan")), "terminal_reward=nan"),
         (dict(terminal_reward="5"), "terminal_reward='5'"),
         (dict(alive_bonus_offset=True), "alive_bonus_offset=True"),
+        # a number that YAML read as a string: the message says so, as for every other hyperparameter
+        (dict(reward_clip=["-1e0", 1]), r"two finite numbers .* \(a string; a YAML file reads a number without a dot"),
+        (dict(terminal_reward="1e-2"), r"terminal_reward='1e-2': .* \(a string; a YAML file"),
+        (dict(alive_bonus_offset="-1e-1"), r"alive_bonus_offset='-1e-1': .* \(a string; a YAML file"),
     ],
 )
 def test_bad_shaping_is_refused_at_construction(kwargs: dict[str, Any], message: str) -> None:

@@ -83,6 +83,36 @@ def test_a_bad_center_is_refused_by_name(name: str, center: np.ndarray, match: s
     np.testing.assert_array_equal(strategy.center, 0.0)
 
 
+@pytest.mark.parametrize(
+    ("make", "name"),
+    [
+        (lambda **kw: ARSStrategy(np.zeros(3), 3, 3, **{"delta_std": 0.1, "learning_rate": 0.1, **kw}), "delta_std"),
+        (
+            lambda **kw: ARSStrategy(np.zeros(3), 3, 3, **{"delta_std": 0.1, "learning_rate": 0.1, **kw}),
+            "learning_rate",
+        ),
+        (lambda **kw: OpenESStrategy(np.zeros(3), 6, **{"sigma": 0.1, "learning_rate": 0.05, **kw}), "sigma"),
+        (lambda **kw: SimpleESStrategy(np.zeros(3), 6, **{"sigma": 0.1, **kw}), "sigma"),
+    ],
+    ids=["ars-delta_std", "ars-learning_rate", "openes-sigma", "simple_es-sigma"],
+)
+@pytest.mark.parametrize(
+    ("value", "match"),
+    [
+        ("0.05", r"a number \(a string; a YAML"),
+        (None, "a number"),
+        (lambda progress: 0.1, r"a number \(\w+ takes no schedule"),
+    ],
+    ids=["string", "None", "schedule"],
+)
+def test_a_step_size_that_is_no_number_is_refused_by_name(
+    make: Callable[..., Strategy], name: str, value: object, match: str
+) -> None:
+    # the strategies converted it with float(): a string was accepted, None or a function failed without the name
+    with pytest.raises(TypeError, match=rf"^{name}=.*it must be {match}"):
+        make(**{name: value})
+
+
 def test_simple_es_weights_follow_a_new_n_elite() -> None:
     # check_settings() (run when load() changes a setting) accepted a new n_elite and kept the old weights: the next
     # tell() failed in a matrix product; a bad weights name passed

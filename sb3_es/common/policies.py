@@ -314,6 +314,8 @@ class LinearPolicy(FlatPolicy):
     :param with_bias: Whether to add a bias.
     :param squash_output: ``tanh`` squashing for Box actions (else clipping).
     :param normalize_observations: Running observation normalization (ARS-V2); ``False`` gives ARS-V1.
+    :param net_arch: Accepted only as ``None`` (no hidden layer: use ``MlpPolicy`` for one); so are
+        ``activation_fn`` (``nn.ReLU``) and ``layer_norm`` (``False``), which a linear policy has no use for.
     """
 
     def __init__(

@@ -54,6 +54,11 @@ class WorkerPool(ABC):
         """
         Start worker ``k`` on a share (sending it the noise table first if it lacks it).
 
+        :param k: Index of the worker.
+        :param handle: The generation's payload, as :meth:`publish` returned it.
+        :param jobs: The share: indices of the generation's jobs (one candidate's episodes each) the worker runs.
+        :param seed: Env seed of this share (its envs are seeded from it, as ``VecEnv.seed``).
+        :param table: The noise table the population reads from (``None``: dense rows).
         :param token: The generation's token if the worker should linger (see :class:`~.worker.ShareRunner`).
         :raises WorkerDied: If the worker is dead.
         """

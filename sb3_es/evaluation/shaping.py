@@ -10,6 +10,8 @@ from typing import Any
 
 import numpy as np
 
+from sb3_es.strategies.base import yaml_string_hint
+
 
 def _finite_number(value: Any) -> bool:
     """:return: Whether ``value`` is a finite real number (not a bool, not a string)."""
@@ -60,15 +62,22 @@ class RewardShaping:
                 values = list(reward_clip)
             finite = all(_finite_number(v) for v in values)
             if len(values) != 2 or not finite or values[0] >= values[1]:
+                hint = next((yaml_string_hint(v) for v in values if yaml_string_hint(v)), "")
                 raise ValueError(
                     f"reward_clip={reward_clip!r}: give two finite numbers (low, high) with low < high, e.g. "
-                    "reward_clip=(-1, 1), or None for no clipping."
+                    f"reward_clip=(-1, 1), or None for no clipping{hint}."
                 )
             clip = (float(values[0]), float(values[1]))
         if terminal_reward is not None and not _finite_number(terminal_reward):
-            raise ValueError(f"terminal_reward={terminal_reward!r}: give a finite number, or None to keep the env's.")
+            raise ValueError(
+                f"terminal_reward={terminal_reward!r}: give a finite number, or None to keep the env's"
+                f"{yaml_string_hint(terminal_reward)}."
+            )
         if not _finite_number(alive_bonus_offset):
-            raise ValueError(f"alive_bonus_offset={alive_bonus_offset!r}: give a finite number (0 for none).")
+            raise ValueError(
+                f"alive_bonus_offset={alive_bonus_offset!r}: give a finite number (0 for none)"
+                f"{yaml_string_hint(alive_bonus_offset)}."
+            )
         return cls(clip, None if terminal_reward is None else float(terminal_reward), float(alive_bonus_offset))
 
     @property

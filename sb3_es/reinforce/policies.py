@@ -81,7 +81,8 @@ class DiscretizedPolicy(ActorCriticPolicy):
     ``itertools.product``), for a factorized one an integer in ``[0, n_bins)`` per dimension.
     :meth:`indices_to_actions` turns them into env actions; ``predict()`` does it for you.
 
-    :param observation_space: Observation space (``Box``, or ``Dict`` of ``Box``, flattened and concatenated).
+    :param observation_space: Observation space: ``Box``, ``Discrete``, ``MultiDiscrete`` or ``MultiBinary`` (the
+        discrete ones one-hot encoded), or a ``Dict`` of them, flattened and concatenated.
     :param action_space: ``Box`` with finite bounds (discretized) or ``Discrete``.
     :param lr_schedule: Learning rate schedule; the optimizer starts with ``lr_schedule(1)``.
     :param n_bins: Number of evenly spaced levels per ``Box`` dimension, ``low`` and ``high`` included

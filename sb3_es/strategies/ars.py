@@ -50,8 +50,8 @@ class ARSStrategy(Strategy):
         self.noise_table = noise_table
         self.n_delta = n_delta
         self.n_top = n_top
-        self.delta_std = float(delta_std)
-        self.learning_rate = float(learning_rate)
+        self.delta_std = check_positive_number("delta_std", delta_std)
+        self.learning_rate = check_non_negative("learning_rate", learning_rate)
         self.check_settings()
         self._deltas: np.ndarray | None = None
 
@@ -62,6 +62,7 @@ class ARSStrategy(Strategy):
             raise ValueError(f"n_top={self.n_top!r} must be between 1 and n_delta={self.n_delta}.")
         check_positive_number("delta_std", self.delta_std)
         check_non_negative("learning_rate", self.learning_rate)  # a learning-rate schedule may end at 0
+        self._check_noise_table(self.n_delta)
 
     @property
     def population_size(self) -> int:

@@ -124,6 +124,14 @@ class Strategy(ABC):
         use; called when it is built and when a loaded model is given new hyperparameters. None to check here.
         """
 
+    def _check_noise_table(self, n: int) -> None:
+        """
+        :param n: Number of table slices a generation draws.
+        :raises ValueError: Naming ``noise_table_size`` when the shared table holds fewer (now, not at ``ask()``).
+        """
+        if self.noise_table is not None:
+            self.noise_table.check_fits(self.num_params, n)
+
     def set_center(self, center: np.ndarray) -> None:
         """
         Move the center, e.g. after ``set_parameters()`` wrote new weights into the policy.
@@ -195,14 +203,17 @@ def check_number(name: str, value: Any) -> float:
     """
     if isinstance(value, numbers.Real) and not isinstance(value, bool):
         return float(value)
-    hint = ""
-    if isinstance(value, str) and parse_number(value) is not None:
-        hint = " (a string; a YAML file reads a number without a dot, such as 1e-2, as one: write 1.0e-2)"
-    elif isinstance(value, str):
-        hint = " (a string)"
-    elif callable(value):
+    hint = yaml_string_hint(value) or (" (a string)" if isinstance(value, str) else "")
+    if callable(value):
         hint = f" ({name} takes no schedule)"
     raise TypeError(f"{name}={value!r}: it must be a number{hint}.")
+
+
+def yaml_string_hint(value: Any) -> str:
+    """:return: For a string that reads as a number (as YAML reads ``1e-2``), a hint for the message; else ``""``."""
+    if isinstance(value, str) and parse_number(value) is not None:
+        return " (a string; a YAML file reads a number without a dot, such as 1e-2, as one: write 1.0e-2)"
+    return ""
 
 
 def parse_number(text: str) -> float | None:

@@ -119,7 +119,7 @@ class NoiseTablePopulation:
     ``center + scales[i] * table[offsets[i]:offsets[i] + dim]``.
 
     It behaves as the dense ``(n, dim)`` array for the local engine (``shape``, ``np.asarray``), and
-    :class:`RayEvaluator` sends only ``offsets`` and ``scales`` to its actors.
+    the sharded evaluators (Ray actors, worker processes) send only ``offsets`` and ``scales`` to their workers.
 
     :param table: The noise table.
     :param center: Center of the population ``(dim,)``.

@@ -89,7 +89,7 @@ class OpenESStrategy(GradientStrategy):
         super().__init__(center, learning_rate, optimizer, momentum, betas, max_speed, seed)
         self.noise_table = noise_table
         self.population_size = population_size
-        self.sigma = float(sigma)
+        self.sigma = check_positive_number("sigma", sigma)
         self.antithetic = antithetic
         self.fitness_shaping = fitness_shaping
         self.weight_decay = weight_decay
@@ -119,13 +119,19 @@ class OpenESStrategy(GradientStrategy):
             if not 0 < check_number(name, rate) <= 1:
                 raise ValueError(f"{name}={rate}: it must be in (0, 1].")
         shape_fitness(np.zeros(2), self.fitness_shaping)  # validates the name
+        self._check_noise_table(self._n_drawn)
+
+    @property
+    def _n_drawn(self) -> int:
+        """:return: Perturbations drawn per generation (each used twice, mirrored, with antithetic sampling)."""
+        return self.population_size // 2 if self.antithetic else self.population_size
 
     def seed_groups(self, n_candidates: int) -> np.ndarray:
         """:return: Mirrored pairs share their reset seeds (the whole population without antithetic sampling)."""
         return mirrored_groups(n_candidates) if self.antithetic else super().seed_groups(n_candidates)
 
     def _ask(self) -> Population:
-        half = self.population_size // 2 if self.antithetic else self.population_size
+        half = self._n_drawn
         if self.noise_table is None:
             eps = self.rng.standard_normal((half, self.num_params))
             self._noise = np.concatenate([eps, -eps]) if self.antithetic else eps

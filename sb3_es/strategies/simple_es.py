@@ -70,12 +70,12 @@ class SimpleESStrategy(Strategy):
         noise_table: SharedNoiseTable | None = None,
     ) -> None:
         super().__init__(center, seed)
+        self.noise_table = noise_table
         self.population_size = population_size
-        self.sigma = float(sigma)
+        self.sigma = check_positive_number("sigma", sigma)
         self.n_elite = n_elite
         self.weights: EliteWeights = weights
         self.check_settings()
-        self.noise_table = noise_table
 
     def check_settings(self) -> None:
         self.population_size = check_count("population_size", self.population_size, 2)
@@ -84,6 +84,7 @@ class SimpleESStrategy(Strategy):
             raise ValueError(f"n_elite={self.n_elite} must be between 1 and population_size={self.population_size}.")
         check_positive_number("sigma", self.sigma)
         self.elite_weights = elite_weights(self.n_elite, self.weights)  # checks the name; follows a new n_elite
+        self._check_noise_table(self.population_size)
 
     def _ask(self) -> Population:
         if self.noise_table is None:
