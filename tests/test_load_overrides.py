@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import inspect
+import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
+import torch as th
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.utils import ConstantSchedule
@@ -358,3 +360,54 @@ def test_openes_with_a_learning_rate_decay_takes_rl_zoos_enjoy_objects(tmp_path:
     before = loaded.policy.parameters_to_vector()
     loaded.learn(1, reset_num_timesteps=False)
     np.testing.assert_array_equal(loaded.policy.parameters_to_vector(), before)
+
+
+@pytest.mark.parametrize("cls", list(CASES), ids=lambda cls: cls.__name__)
+def test_custom_objects_replace_saved_values_that_cannot_be_read(
+    cls: type[BaseAlgorithm], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # As SB3's custom_objects: saved objects whose module is gone are replaced, never read (they were read anyway,
+    # and load() failed with a message advising custom_objects)
+    module = f"gone_{cls.__name__.lower()}"
+    (tmp_path / f"{module}.py").write_text(
+        "import torch\n\nclass Act(torch.nn.Tanh):\n    pass\n\nclass Rate:\n    def __call__(self, progress):\n"
+        "        return 0.01\n"
+    )
+    monkeypatch.syspath_prepend(str(tmp_path))
+    gone = __import__(module)
+    has_lr = "learning_rate" in inspect.signature(cls).parameters
+    extra = {"learning_rate": gone.Rate()} if has_lr else {}
+    env = make_vec_env("Pendulum-v1", n_envs=2, seed=0)
+    model = cls("MlpPolicy", env, seed=0, policy_kwargs=dict(net_arch=[8], activation_fn=gone.Act), **extra)
+    model.learn(1)
+    model.save(tmp_path / "model.zip")
+    monkeypatch.delitem(sys.modules, module)
+    monkeypatch.setattr(sys, "path", [p for p in sys.path if p != str(tmp_path)])
+    with pytest.raises(ValueError, match=f"module '{module}'"):
+        cls.load(tmp_path / "model.zip")
+    objects: dict[str, Any] = {"policy_kwargs": dict(net_arch=[8], activation_fn=th.nn.Tanh)}
+    objects |= {"learning_rate": 0.0, "lr_schedule": lambda _: 0.0} if has_lr else {}  # as rl-zoo's enjoy gives them
+    loaded = cls.load(tmp_path / "model.zip", env=make_vec_env("Pendulum-v1", n_envs=2, seed=1), custom_objects=objects)
+    assert loaded.policy_kwargs["activation_fn"] is th.nn.Tanh
+    np.testing.assert_array_equal(loaded.policy.parameters_to_vector(), model.policy.parameters_to_vector())
+    loaded.learn(1, reset_num_timesteps=False)
+    if has_lr:
+        check_applied(loaded, {"learning_rate": 0.0})
+
+
+@pytest.mark.parametrize("cls", list(CASES), ids=lambda cls: cls.__name__)
+def test_a_save_without_any_one_hyperparameter_loads_and_trains(cls: type[BaseAlgorithm], tmp_path: Path) -> None:
+    # Left out, each takes the constructor's default, which must suit the saved model: CMAES's max_restarts default
+    # was refused without restarts, and ARS's n_top became 8 (the default n_delta's) beside n_delta=1
+    env = make_vec_env("Pendulum-v1", n_envs=2, seed=0, env_kwargs=dict(max_episode_steps=20))
+    size = {"n_delta": 1} if cls is ARS else {"n_episodes": 2} if cls is REINFORCE else {"population_size": 4}
+    model = cls("MlpPolicy", env, seed=0, **size)
+    model.learn(1)
+    assert issubclass(cls, ESBaseAlgorithm)
+    names = sorted(cls._applicable_on_load() & cls._parameters() - {"verbose"})  # verbose: SB3 reads it, as for PPO
+    assert len(names) >= 5
+    for name in [*names, "_env_rng"] if isinstance(model, PopulationAlgorithm) else names:
+        model.save(tmp_path / "model.zip", exclude=[name])
+        loaded = cls.load(tmp_path / "model.zip", env=env)
+        loaded.learn(1, reset_num_timesteps=False)
+        assert loaded.num_timesteps > model.num_timesteps, name

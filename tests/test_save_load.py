@@ -499,3 +499,17 @@ def test_shipped_trained_models_load_and_perform(path: Path) -> None:
     env_id, floor = TRAINED_ENVS[path.name]
     (episode_return,), _ = evaluate_policy(model, make_vec_env(env_id, seed=0), 1, return_episode_rewards=True)
     assert episode_return > floor
+
+
+@pytest.mark.parametrize("algo", ALGORITHMS)
+def test_a_model_without_an_env_comes_from_load_only(algo: Algo, tmp_path: Path) -> None:
+    # env=None failed in SB3 with "object has no attribute 'observation_space'"; with evaluator="processes" the
+    # message advised an evaluator instance, which failed the same way
+    with pytest.raises(
+        ValueError, match=rf"^{algo.name}\(policy, env=None\): give an env .* {algo.name}\.load\(path\)"
+    ):
+        algo.make(None, 4)
+    algo.make("Pendulum-v1", 4).save(tmp_path / "model.zip")
+    loaded = algo.cls.load(tmp_path / "model.zip")  # no env: for predict()
+    assert loaded.get_env() is None
+    assert loaded.predict(np.zeros(3, dtype=np.float32))[0].shape == (1,)

@@ -103,7 +103,7 @@ class CMAES(PopulationAlgorithm):
 
     def _apply_hyperparameters(self, changed: dict[str, Any]) -> None:
         super()._apply_hyperparameters(changed)  # the strategy checks the count
-        if "max_restarts" in changed:
+        if changed.get("max_restarts", DEFAULT_MAX_RESTARTS) != DEFAULT_MAX_RESTARTS:  # as the constructor checks it
             check_restarts_on(self.restarts, changed["max_restarts"])
 
     def _make_strategy(self, center: np.ndarray, seed: np.random.SeedSequence) -> CMAESStrategy:

@@ -146,7 +146,14 @@ class ESBaseAlgorithm(BaseAlgorithm):
         device: th.device | str,
         seed: int | None,
         max_episode_steps: int | None = None,
+        _init_setup_model: bool = True,
     ) -> None:
+        if env is None and _init_setup_model:  # SB3 then fails on a missing observation_space
+            name = type(self).__name__
+            raise ValueError(
+                f"{name}(policy, env=None): give an env (an env id such as 'Pendulum-v1', a Gymnasium env or a "
+                f"VecEnv), from whose spaces the policy is built. A model without an env comes from {name}.load(path)."
+            )
         seed = check_seed(seed)
         check_policy_kwargs(policy_kwargs)
         self._check_live_values({"max_episode_steps": max_episode_steps})
@@ -354,11 +361,15 @@ class ESBaseAlgorithm(BaseAlgorithm):
         custom_objects = dict(custom_objects or {})
         # As SB3's load() rebuilds learning_rate's schedule from a replaced learning_rate, a hyperparameter replaced
         # here drives training: handled as a change, not left on the model beside a strategy that uses the saved one.
+        # One that load() can change (policy_kwargs too: the policy is rebuilt with it before the saved weights are
+        # loaded into it, as in SB3) stays in custom_objects as well, so that the file's value, which may not even
+        # deserialize here, is never read. One that cannot change is refused as in kwargs when it differs from the
+        # saved one (SB3 would set it on the model beside a strategy built with the saved value).
         # (Names of this class's own signature: a subclass whose __init__ takes **kwargs keeps SB3's replacement.)
-        # One that cannot change is refused as in kwargs (SB3 would set it on the model beside a strategy built with
-        # the saved value).
         changeable = cls._applicable_on_load() & cls._parameters()
-        replaced = {key: custom_objects.pop(key) for key in set(custom_objects) & cls._parameters()}
+        live = {key: custom_objects[key] for key in set(custom_objects) & changeable}
+        fixed = (set(custom_objects) & cls._parameters()) - changeable
+        replaced = {**live, **{key: custom_objects.pop(key) for key in fixed}}
         data, _ = check_save_file(path, cls, custom_objects)
         cls._check_save_data(path, data)
         signature = inspect.signature(cls.__init__).parameters
@@ -366,14 +377,14 @@ class ESBaseAlgorithm(BaseAlgorithm):
             key: _as_count(constant_value(value), getattr(signature.get(key), "annotation", None))
             for key, value in {**replaced, **kwargs}.items()
         }
-        changed = cls._changed_hyperparameters(data, kwargs)
+        changed = cls._changed_hyperparameters({k: v for k, v in data.items() if k not in live}, kwargs)
         if isinstance(device, str) and device == "auto":
             device = cls._auto_device
         model = super().load(path, env, device, custom_objects, print_system_info, force_reset, **kwargs)
         # One left out of the save (save(exclude=[...])) is the constructor's default on the model, as in SB3: the
         # state built with the saved value takes that default too, so that the model uses what it shows.
         dropped = changeable - set(kwargs) - set(model._excluded_save_params())
-        changed |= {key: getattr(model, key) for key in dropped if key not in data and f"_{key}" not in data}
+        changed |= {key: signature[key].default for key in dropped if key not in data and f"_{key}" not in data}
         model._apply_hyperparameters(changed)
         # The saved or changed settings against the env given (SB3 built the model with it before restoring them).
         model._check_env()

@@ -18,11 +18,6 @@ if TYPE_CHECKING:
 #: from the Gymnasium specs of its VecEnv's envs (:func:`~sb3_es.common.env_recipe.env_recipe`).
 EVALUATOR_NAMES = ("local", "processes", "ray")
 
-_FACTORY_HINT = {
-    "processes": "evaluator=ProcessEvaluator(env_factory) from sb3_es.evaluation.processes",
-    "ray": "evaluator=RayEvaluator(env_factory) from sb3_es.evaluation.ray",
-}
-
 
 def check_evaluator_name(evaluator: str | PopulationEvaluator) -> None:
     """
@@ -46,12 +41,7 @@ def check_evaluator(evaluator: str | PopulationEvaluator, env_id: str | None, en
     if isinstance(evaluator, PopulationEvaluator):
         return
     check_evaluator_name(evaluator)
-    if evaluator != "local" and env_id is None:
-        if env is None:
-            raise ValueError(
-                f"evaluator={evaluator!r} builds each worker's envs from an env id or from the model's VecEnv, but "
-                f"the model has no env: pass the env id (env='BipedalWalker-v3'), or {_FACTORY_HINT[evaluator]}."
-            )
+    if evaluator != "local" and env_id is None and env is not None:  # (no env: the constructors refuse it)
         env_recipe(env, evaluator)  # raises if the workers cannot rebuild the envs
 
 

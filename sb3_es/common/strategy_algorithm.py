@@ -107,6 +107,8 @@ class StrategyAlgorithm(ESBaseAlgorithm):
         elif self.strategy.restored_legacy_state:
             self._upgrade_legacy_strategy()
             self.strategy.state_version = self.strategy.STATE_VERSION
+        if self._env_rng is None:  # left out of a save (save(exclude=["_env_rng"])): a new stream, as SB3's _last_obs
+            self._env_rng = np.random.default_rng(stream_seeds(self.seed)[1])
         self.policy.load_from_vector(self.strategy.center)
         self._warn_double_normalization(self.env)
 
