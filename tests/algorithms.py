@@ -57,6 +57,8 @@ class Algo:
     :param defaults: Keyword arguments every generic test passes.
     :param optimizer_steps: The updates the strategy (or optimizer) has applied, read from its own state, or
         ``None`` when it keeps no count: an interrupted or failed generation must not reach that state.
+    :param logged: The ``train/`` keys (prefix left out) that every update logs, given ``logged_with``.
+    :param logged_with: Keyword arguments that switch on the optional ones of ``logged``.
     """
 
     cls: type[BaseAlgorithm]
@@ -67,6 +69,8 @@ class Algo:
     policy: str = "LinearPolicy"
     defaults: dict[str, Any] = field(default_factory=dict)
     optimizer_steps: Callable[[Any], int] | None = None
+    logged: tuple[str, ...] = ()
+    logged_with: dict[str, Any] = field(default_factory=dict)
 
     @property
     def name(self) -> str:
@@ -96,16 +100,41 @@ class Algo:
 
 #: Every algorithm; a new one is covered by every generic test by adding its entry here.
 ALGOS = [
-    Algo(ARS, lambda n: {"n_delta": n // 2}, dict(n_delta=2), cartpole_steps=40_000),
+    Algo(
+        ARS,
+        lambda n: {"n_delta": n // 2},
+        dict(n_delta=2),
+        cartpole_steps=40_000,
+        logged=("step_size", "delta_std", "return_std", "learning_rate", "best_fitness", "n_updates"),
+    ),
     Algo(
         OpenES,
         population_of,
         dict(population_size=16, sigma=0.5, learning_rate=0.1),
         optimizer_steps=lambda model: torch_optimizer_steps(model.strategy.optimizer),
+        logged=("sigma", "learning_rate", "grad_norm", "best_fitness", "n_updates"),
     ),
-    Algo(CMAES, population_of, dict(sigma=0.5, n_eval_episodes=2), optimizer_steps=lambda m: m.strategy.es.countiter),
-    Algo(PGPE, population_of, dict(population_size=16, stdev_init=0.5, max_speed=0.3), cartpole_steps=30_000),
-    Algo(SimpleES, population_of, dict(population_size=16, sigma=0.5, n_elite=4), cartpole_steps=30_000),
+    Algo(
+        CMAES,
+        population_of,
+        dict(sigma=0.5, n_eval_episodes=2),
+        optimizer_steps=lambda m: m.strategy.es.countiter,
+        logged=("sigma", "population_size", "restarts", "best_fitness", "n_updates"),
+    ),
+    Algo(
+        PGPE,
+        population_of,
+        dict(population_size=16, stdev_init=0.5, max_speed=0.3),
+        cartpole_steps=30_000,
+        logged=("learning_rate", "stdev_mean", "stdev_min", "stdev_max", "speed", "grad_norm", "best_fitness"),
+    ),
+    Algo(
+        SimpleES,
+        population_of,
+        dict(population_size=16, sigma=0.5, n_elite=4),
+        cartpole_steps=30_000,
+        logged=("sigma", "step_norm", "best_fitness", "n_updates"),
+    ),
     Algo(
         REINFORCE,
         lambda n: {"n_episodes": n},
@@ -115,6 +144,8 @@ ALGOS = [
         policy="MlpPolicy",
         defaults=dict(device="cpu"),
         optimizer_steps=lambda model: torch_optimizer_steps(model.policy.optimizer),
+        logged=("policy_loss", "entropy", "learning_rate", "value_loss", "grad_norm", "n_steps", "n_updates"),
+        logged_with=dict(use_baseline=True, max_grad_norm=1.0),
     ),
 ]
 #: ``@pytest.mark.parametrize("algo", ALGORITHMS)``: every algorithm, with its name as the test id.

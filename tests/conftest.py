@@ -9,6 +9,27 @@ import pytest
 import torch as th
 
 
+@pytest.fixture(scope="session", autouse=True)
+def sb3_logdir(tmp_path_factory: pytest.TempPathFactory) -> Iterator[None]:
+    """SB3's logger folder when a run gives none: ``configure()`` reads ``SB3_LOGDIR``, else makes a new
+    ``$TMPDIR/SB3-<time>`` per ``learn()``. Subprocesses inherit it."""
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv("SB3_LOGDIR", str(tmp_path_factory.mktemp("sb3_logdir")))
+        yield
+
+
+#: Torch's thread count when the session starts.
+TORCH_THREADS = th.get_num_threads()
+
+
+@pytest.fixture(autouse=True)
+def torch_threads() -> Iterator[None]:
+    """After each test, torch's thread count (process-wide) is the session's again: benchmark scripts and rl-zoo's
+    ``--num-threads`` set it, in tests and in module fixtures."""
+    yield
+    th.set_num_threads(TORCH_THREADS)
+
+
 @pytest.fixture(scope="session")
 def ray_cluster() -> Iterator[Any]:
     """A local Ray instance with 2 CPUs for the whole session (started once: it takes seconds)."""
@@ -26,9 +47,7 @@ def ray_cluster() -> Iterator[Any]:
 
 
 @pytest.fixture
-def one_torch_thread() -> Iterator[None]:
-    """Small torch networks (REINFORCE) run fastest, with reproducible timings, on one thread (2-core machines)."""
-    threads = th.get_num_threads()
+def one_torch_thread() -> None:
+    """Small torch networks (REINFORCE) run fastest, with reproducible timings, on one thread (2-core machines);
+    ``torch_threads`` restores the count."""
     th.set_num_threads(1)
-    yield
-    th.set_num_threads(threads)

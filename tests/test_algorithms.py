@@ -255,11 +255,12 @@ def test_a_function_callback_with_the_progress_bar(algo: Algo) -> None:
 # ---------------------------------------------------------------------------- logging
 @pytest.mark.parametrize("algo", ALGORITHMS)
 def test_logger_csv_keys(algo: Algo, tmp_path: Path) -> None:
-    """SB3's keys, one row per generation; each algorithm's ``train/`` keys are checked in its own file."""
-    model = pendulum_model(algo)
+    """SB3's keys and the algorithm's ``train/`` keys, in every row, one row per generation (update)."""
+    model = pendulum_model(algo, **algo.logged_with)
     rows = learn_logged(model, 2 * GENERATION, tmp_path)
     assert len(rows) == 2
     required = {"rollout/ep_rew_mean", "rollout/ep_len_mean", "time/fps", "time/total_timesteps", "time/iterations"}
+    required |= {f"train/{key}" for key in algo.logged}
     if algo.population:
         required |= {"rollout/candidate_return_max", "rollout/candidate_return_mean", "train/best_fitness"}
     assert required <= set(rows[0])

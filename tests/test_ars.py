@@ -24,7 +24,6 @@ PENDULUM_GENERATION = 2 * 2 * 200  # n_delta=2, 200-step episodes, 1 env
 def test_logged_train_values(tmp_path: Path) -> None:
     model = ARS("LinearPolicy", "Pendulum-v1", n_delta=2, seed=0)
     (row,) = learn_logged(model, PENDULUM_GENERATION, tmp_path)
-    assert all(row[f"train/{key}"] != "" for key in ("step_size", "delta_std", "return_std", "learning_rate"))
     assert float(row["train/learning_rate"]) == pytest.approx(0.02)
     assert float(row["train/delta_std"]) == pytest.approx(0.05)
     assert float(row["train/return_std"]) > 0 and float(row["train/step_size"]) > 0

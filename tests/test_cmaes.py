@@ -66,7 +66,6 @@ def assert_same_cma_state(a: CMAES, b: CMAES) -> None:
 def test_logged_train_values(tmp_path: Path) -> None:
     model = pendulum_model()
     rows = learn_logged(model, 2 * PENDULUM_GENERATION, tmp_path)
-    assert all(row[f"train/{key}"] != "" for key in ("sigma", "population_size") for row in rows)
     assert not any(key.startswith("train/stop_") for key in rows[0])
     assert [float(r["train/population_size"]) for r in rows] == [PENDULUM_POPULATION] * 2
     assert float(rows[-1]["train/sigma"]) == pytest.approx(model.strategy.es.sigma)
@@ -199,7 +198,7 @@ def test_default_population_size_is_pycmas(env_id: str) -> None:
 
 
 def test_large_policy_generation_save_load_resume(walker_model: CMAES, tmp_path: Path) -> None:
-    model = walker_model
+    model = copy.deepcopy(walker_model)  # the module's model stays untrained
     model.learn(1)
     assert model._n_updates == 1
     assert model.num_timesteps > 0

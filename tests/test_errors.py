@@ -44,6 +44,9 @@ def each(cls: type, name: str, values: list[Any], match: str | None = None, **kw
 
 
 NAN, INF = float("nan"), float("inf")
+#: Every algorithm class, and the population methods' (from ``ALGOS``: a new algorithm is covered).
+CLASSES = [algo.cls for algo in ALGOS]
+POPULATION_CLASSES = [algo.cls for algo in ALGOS if algo.population]
 #: ``(algorithm, constructor arguments, what the error message must match)``: every algorithm's bad values.
 BAD_HYPERPARAMETERS = [
     *each(ARS, "n_delta", [0, -1, 2.5, NAN, INF, "8"], r"n_delta=(0|-1|2.5|nan|inf|'8'): it must be"),
@@ -55,12 +58,12 @@ BAD_HYPERPARAMETERS = [
     *each(ARS, "learning_rate", [0.0, -0.02, NAN, INF, lambda progress: 0.0]),
     *[  # checked by the population methods' shared base
         param
-        for cls in (algo.cls for algo in ALGOS if algo.population)
+        for cls in POPULATION_CLASSES
         for param in each(cls, "n_eval_episodes", [0, -2, 1.5, NAN, "2"], r"n_eval_episodes=(0|-2|1.5|nan|'2'): ")
     ],
     *[
         param
-        for cls in (ARS, OpenES, CMAES, PGPE, SimpleES, REINFORCE)
+        for cls in CLASSES
         for param in each(cls, "max_episode_steps", [0, -5, 2.5, NAN, "100"], r"max_episode_steps=\S+: it must be")
     ],
     *each(OpenES, "population_size", [1, 0, -2], antithetic=True),
@@ -132,16 +135,12 @@ BAD_HYPERPARAMETERS = [
     *each(REINFORCE, "policy_kwargs", [dict(net_arch=dict(pi=[8], qf=[8]))], r"unknown entry \['qf'\]"),
     *each(REINFORCE, "policy_kwargs", [dict(joint=True, max_joint_actions=1000.7)], "max_joint_actions=1000.7"),
     *each(REINFORCE, "policy_kwargs", [dict(value_net_arch=[7])], r"value_net_arch=\[7\] gives .* use_baseline=True"),
-    *[
-        param
-        for cls in (ARS, OpenES, CMAES, PGPE, SimpleES, REINFORCE)
-        for param in each(cls, "stats_window_size", [0, -1])
-    ],
+    *[param for cls in CLASSES for param in each(cls, "stats_window_size", [0, -1])],
     *each(OpenES, "learning_rate_decay", [0.9], r"learning_rate_decay=0.9 would never apply", learning_rate=0.0005),
     *each(OpenES, "sigma_decay", [0.99], r"sigma_decay=0.99 would never apply", sigma=0.005),
     *[
         param
-        for cls in (ARS, OpenES, CMAES, PGPE, SimpleES)
+        for cls in POPULATION_CLASSES
         for param in each(
             cls, "policy_kwargs", [dict(layer_norm=True), dict(activation_fn=th.nn.Tanh)], "LinearPolicy has no hidden"
         )
@@ -283,8 +282,8 @@ def test_a_schedule_where_none_is_taken_is_named(cls: type, kwargs: dict[str, An
 @pytest.mark.parametrize(
     ("cls", "kwargs"),
     [
-        *[(cls, dict(common_seeds="no")) for cls in (ARS, OpenES, CMAES, PGPE, SimpleES)],
-        *[(cls, dict(zero_policy="False")) for cls in (ARS, OpenES, CMAES, PGPE, SimpleES)],
+        *[(cls, dict(common_seeds="no")) for cls in POPULATION_CLASSES],
+        *[(cls, dict(zero_policy="False")) for cls in POPULATION_CLASSES],
         (ARS, dict(policy_kwargs=dict(normalize_observations="False"))),
         (REINFORCE, dict(normalize_returns="false")),
         (REINFORCE, dict(use_baseline="false")),

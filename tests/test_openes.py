@@ -68,7 +68,6 @@ def assert_same_strategy_state(a: OpenES, b: OpenES) -> None:
 def test_logged_train_values(tmp_path: Path) -> None:
     model = pendulum_model()
     (row,) = learn_logged(model, PENDULUM_GENERATION, tmp_path)
-    assert all(row[f"train/{key}"] != "" for key in ("sigma", "learning_rate", "best_fitness"))
     assert float(row["train/sigma"]) == pytest.approx(0.1)
     assert float(row["train/learning_rate"]) == pytest.approx(0.01)
 

@@ -119,9 +119,6 @@ def test_defaults_follow_the_clipup_paper() -> None:
 
 def test_logged_train_values(tmp_path: Path) -> None:
     (row,) = learn_logged(pendulum_model(), PENDULUM_GENERATION, tmp_path)
-    keys = {"train/learning_rate", "train/stdev_mean", "train/stdev_min", "train/stdev_max", "train/speed"}
-    keys |= {"train/grad_norm", "train/best_fitness"}
-    assert all(row[key] != "" for key in keys)
     assert float(row["train/learning_rate"]) == pytest.approx(0.075)
     assert float(row["train/speed"]) == pytest.approx(0.075)  # first step: lr along the normalized gradient
 

@@ -18,7 +18,6 @@ import torch as th
 from algorithms import assert_identical, check_resume, policy_state
 from envs import StepCounter
 from gymnasium import spaces
-from stable_baselines3.common.logger import KVWriter, Logger
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.policies import ActorCriticPolicy
 from stable_baselines3.common.vec_env import DummyVecEnv
@@ -49,16 +48,6 @@ class BoxActionEnv(gym.Env):
         self._t += 1
         obs = self.np_random.uniform(-1, 1, size=3).astype(np.float32)
         return obs, float(-np.sum(np.square(action))), self._t >= self.episode_length, False, {}
-
-
-class RecordWriter(KVWriter):
-    """Keeps every dumped key/value dict."""
-
-    def __init__(self) -> None:
-        self.records: list[dict[str, Any]] = []
-
-    def write(self, key_values: dict[str, Any], key_excluded: dict[str, Any], step: int = 0) -> None:
-        self.records.append(dict(key_values))
 
 
 def counted_cartpole(n_envs: int, counter: list[int]) -> DummyVecEnv:
@@ -143,22 +132,6 @@ def test_native_discrete_actions() -> None:
     policy = DiscretizedPolicy(spaces.Box(-1, 1, (2,)), spaces.Discrete(3, start=-1), lambda _: 1e-3)
     actions, _ = policy.predict(np.zeros((50, 2), dtype=np.float32))
     assert set(np.unique(actions)) <= {-1, 0, 1}
-
-
-def test_logged_train_keys() -> None:
-    writer = RecordWriter()
-    model = REINFORCE("MlpPolicy", "CartPole-v1", n_episodes=2, use_baseline=True, max_grad_norm=1.0, seed=0)
-    model.set_logger(Logger(folder=None, output_formats=[writer]))
-    model.learn(300)
-    assert writer.records
-    keys = set(writer.records[-1])
-    for key in (
-        "train/policy_loss",
-        "train/entropy",
-        "train/learning_rate",
-        "train/value_loss",
-    ):
-        assert key in keys, key
 
 
 def test_save_load_round_trip(tmp_path: Path) -> None:

@@ -136,16 +136,6 @@ def test_best_params_of_a_noise_table_population_are_its_row() -> None:
     np.testing.assert_array_equal(strategy.best_params, dense[3])
 
 
-@pytest.mark.parametrize("name", STRATEGIES)
-def test_every_strategy_maximizes_a_sphere(name: str) -> None:
-    """20 generations of -||x - 1||^2 from 0 in 4 dimensions: the center gets closer to the optimum."""
-    strategy = STRATEGIES[name](np.zeros(4), seed=0)
-    for _ in range(20):
-        population = np.asarray(strategy.ask())
-        strategy.tell(-np.sum((population - 1.0) ** 2, axis=1))
-    assert np.linalg.norm(strategy.center - 1.0) < 0.7 * np.linalg.norm(np.ones(4))
-
-
 #: Every strategy (a key of :data:`STRATEGIES`): a new one from 0 in 5 dimensions, the generations it runs on
 #: -||x - 1||^2, and the distance to the optimum (sqrt(5) = 2.2 at the start) and the best fitness it must reach,
 #: as precise as each gets (CMA-ES's adapted step size homes in; the others keep a step or noise scale).

@@ -23,7 +23,6 @@ import pytest
 import rl_zoo3
 import rl_zoo3.hyperparams_opt
 import rl_zoo3.train
-import torch
 import yaml
 from rl_zoo3.exp_manager import ExperimentManager
 
@@ -139,14 +138,6 @@ def shipped_envs(key: str) -> tuple[str, ...]:
 def zoo(*args: str) -> None:
     """``python -m sb3_es.zoo ARGS``, in this process."""
     main(list(args))
-
-
-@pytest.fixture(autouse=True)
-def torch_threads() -> Any:
-    """rl-zoo's ``--num-threads`` (used below: one thread is faster for these small networks) is process-wide."""
-    threads = torch.get_num_threads()
-    yield
-    torch.set_num_threads(threads)
 
 
 def run(args: list[str], cwd: Path) -> subprocess.CompletedProcess:
