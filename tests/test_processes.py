@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import functools
 import gc
+import math
+import multiprocessing
 import os
 import signal
 import subprocess
@@ -30,7 +32,7 @@ from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNorm
 
 from sb3_es import ARS
 from sb3_es.common.policies import MlpPolicy
-from sb3_es.evaluation import VecEnvEvaluator, processes
+from sb3_es.evaluation import VecEnvEvaluator, processes, sharded
 from sb3_es.evaluation.processes import ProcessEvaluator, usable_cpus
 from sb3_es.evaluation.worker import DEFAULT_ENVS_PER_WORKER
 
@@ -305,6 +307,27 @@ def test_set_env_rebuilds_the_workers_from_the_new_env(monkeypatch: pytest.Monke
     assert model._n_updates == 2
 
 
+def test_close_stops_the_workers_the_model_built(monkeypatch: pytest.MonkeyPatch) -> None:
+    # They idled until the model was garbage-collected (learn()'s locals and the callbacks hold it in a cycle)
+    monkeypatch.setattr(processes, "usable_cpus", lambda: 2)
+    model = ARS("LinearPolicy", "Pendulum-v1", n_delta=2, seed=0, evaluator="processes")
+    model.learn(1)
+    assert isinstance(model._evaluator, ProcessEvaluator)
+    pids = [process.pid for process in model._evaluator._workers]
+    model.close()
+    assert wait_gone(pids) and model._evaluator is None
+    model.learn(1, reset_num_timesteps=False)  # new workers
+    assert isinstance(model._evaluator, ProcessEvaluator) and model._n_updates == 2
+    model.close()
+    # an evaluator passed in is its owner's: close() leaves it running
+    with ProcessEvaluator("Pendulum-v1", num_workers=1) as evaluator:
+        model = ARS("LinearPolicy", "Pendulum-v1", n_delta=2, seed=0, evaluator=evaluator)
+        model.learn(1)
+        model.close()
+        model.learn(1, reset_num_timesteps=False)
+        assert model._evaluator is evaluator and not any(gone(p.pid) for p in evaluator._workers)
+
+
 def test_models_in_a_loop() -> None:
     pids: list[int] = []
     for seed in range(3):
@@ -396,6 +419,20 @@ def test_bad_arguments() -> None:
         ProcessEvaluator("Pendulum-v1", start_method="thread")
     with pytest.raises(TypeError, match="env_kwarg: the env arguments of a worker are wrapper_class, env_kwargs"):
         ProcessEvaluator("Pendulum-v1", env_kwarg={"g": 9.0})  # type: ignore[call-arg]
+    # RayEvaluator's name for it is not taken for an env argument.
+    with pytest.raises(TypeError, match="max_actor_restarts: that is RayEvaluator's; this evaluator's is max_worker_r"):
+        ProcessEvaluator("Pendulum-v1", max_actor_restarts=1)  # type: ignore[call-arg]
+    # Timeouts: a positive number of seconds, math.inf (or None, for generation_timeout) for no limit.
+    for name in ("start_timeout", "generation_timeout"):
+        for wrong in (None, "5"):
+            if not (wrong is None and name == "generation_timeout"):
+                with pytest.raises(TypeError, match=rf"{name}={wrong!r}: it must be a number"):
+                    ProcessEvaluator("Pendulum-v1", **{name: wrong})  # type: ignore[arg-type]
+        for wrong in (0, -1, math.nan):
+            with pytest.raises(ValueError, match=rf"{name}={wrong!r}: give a positive number of seconds \(.*math.inf"):
+                ProcessEvaluator("Pendulum-v1", **{name: wrong})  # type: ignore[arg-type]
+    assert ProcessEvaluator("Pendulum-v1", start_timeout=math.inf).start_timeout == math.inf
+    assert ProcessEvaluator("Pendulum-v1", generation_timeout=math.inf).generation_timeout is None
     lock = threading.Lock()  # every worker gets a copy of the env arguments: one that does not pickle is named now
     with pytest.raises(TypeError, match=r"env=<function .* does not pickle \(TypeError: cannot pickle '_thread.lock'"):
         ProcessEvaluator(lambda: ToyEnv() if lock else ToyEnv())
@@ -405,6 +442,24 @@ def test_bad_arguments() -> None:
     with pytest.raises(Exception, match="NoSuchEnv"):
         evaluator.start()
     assert evaluator._workers == []
+
+
+def test_waits_longer_than_the_os_takes_are_made_of_pieces(monkeypatch: pytest.MonkeyPatch) -> None:
+    """poll() refuses a timeout over about 24 days (OverflowError): a longer wait, math.inf included, is a series
+    of shorter ones, which goes on until a reply comes or the whole timeout is over."""
+    receiver, sender = multiprocessing.Pipe(duplex=False)
+    sender.send("at once")
+    assert processes._wait([receiver], 1e12) == [receiver]
+    assert receiver.recv() == "at once"
+    monkeypatch.setattr(sharded, "MAX_WAIT", 0.02)
+    start = time.monotonic()
+    assert processes._wait([receiver], 0.2) == []
+    assert time.monotonic() - start >= 0.19  # not over after the first piece
+    timer = threading.Timer(0.2, sender.send, ("later",))
+    timer.start()
+    assert processes._wait([receiver], math.inf) == [receiver]
+    assert receiver.recv() == "later"
+    timer.join()
 
 
 def test_an_env_registered_by_the_script_is_named_in_a_spawned_worker() -> None:

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import gc
 import logging
+import math
 import os
 import subprocess
 import sys
@@ -290,6 +291,23 @@ def test_generation_data_that_actors_cannot_load_is_an_error() -> None:
         result = evaluator.evaluate(policy, population, population[0], 1, seed=0)
         assert result.returns.shape == (4, 1)
         assert evaluator.last_timings["linger_times"] == [0.0, 0.0]
+
+
+def test_bad_arguments() -> None:
+    # Each is named, with what to give instead (not a comparison error between a str and an int).
+    for wrong in ("1", None):
+        with pytest.raises(TypeError, match=rf"num_cpus_per_worker={wrong!r}: it must be a number"):
+            RayEvaluator(ToyEnv, num_cpus_per_worker=wrong)  # type: ignore[arg-type]
+    for wrong in (0, math.inf, math.nan):
+        with pytest.raises(ValueError, match=rf"num_cpus_per_worker={wrong}: it must be a positive number"):
+            RayEvaluator(ToyEnv, num_cpus_per_worker=wrong)
+    with pytest.raises(TypeError, match=r"start_timeout=None: it must be a number"):
+        RayEvaluator(ToyEnv, start_timeout=None)  # type: ignore[arg-type]
+    with pytest.raises(TypeError, match=r"generation_timeout='10': it must be a number"):
+        RayEvaluator(ToyEnv, generation_timeout="10")  # type: ignore[arg-type]
+    # The worker processes' name for it is not taken for an env argument.
+    with pytest.raises(TypeError, match="max_worker_restarts: that is ProcessEvaluator's; this evaluator's is max_act"):
+        RayEvaluator(ToyEnv, max_worker_restarts=1)  # type: ignore[call-arg]
 
 
 @pytest.mark.timeout(300, method="thread")

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import functools
 import logging
+import math
 import os
 import signal
 import time
@@ -32,7 +33,7 @@ from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.vec_env import VecTransposeImage
 
 from sb3_es.common.policies import MlpPolicy
-from sb3_es.evaluation import VecEnvEvaluator
+from sb3_es.evaluation import VecEnvEvaluator, sharded
 from sb3_es.evaluation.process_worker import RemoteTraceback
 from sb3_es.evaluation.processes import ProcessEvaluator
 from sb3_es.evaluation.sharded import ShardedEvaluator
@@ -342,6 +343,50 @@ def test_a_replacements_start_is_not_counted_in_generation_timeout(
         result = evaluator.evaluate(policy, population, population[0], 1, seed=0)
         assert evaluator.restarted_workers == 1
         assert len(result.returns) == 4
+
+
+def test_timeouts_without_a_limit(host: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """math.inf is no limit; a timeout beyond what the OS (about 24 days) or Ray take is waited in pieces."""
+    assert make_evaluator(host, ToyEnv, generation_timeout=math.inf).generation_timeout is None
+    policy = toy_policy()
+    population = toy_population(policy, 4)
+    local = VecEnvEvaluator(make_vec_env(ToyEnv, n_envs=4)).evaluate(policy, population, population[0], 1, seed=0)
+    with make_evaluator(host, ToyEnv, num_workers=2, start_timeout=math.inf, generation_timeout=1e12) as evaluator:
+        assert evaluator.generation_timeout == 1e12
+        assert_same_candidates(evaluator.evaluate(policy, population, population[0], 1, seed=0), local)
+        # Pieces far shorter than the waits: each wait goes on after its pieces that end with nothing ready.
+        monkeypatch.setattr(sharded, "MAX_WAIT", 0.001)
+        assert_same_candidates(evaluator.evaluate(policy, population, population[0], 1, seed=0), local)
+        assert evaluator.restarted_workers == 0
+
+
+@pytest.mark.parametrize(
+    "error", [SystemExit(3), KeyboardInterrupt("raised by the env")], ids=["SystemExit", "KeyboardInterrupt"]
+)
+def test_an_exit_raised_by_the_env_is_raised_not_retried(host: str, error: BaseException) -> None:
+    """SystemExit and KeyboardInterrupt raised by the env's code (workers ignore SIGINT) are env errors: raised
+    in the driver with the worker's traceback, not taken for a dead worker (nor, on Ray, for a cancellation)."""
+    policy = toy_policy()
+    population = toy_population(policy, 4)
+
+    class ExitingEnv(ToyEnv):
+        def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict]:
+            raise error
+
+    def exit_in_call(venv: Any) -> None:
+        raise error
+
+    restarts = {"max_actor_restarts" if host == "ray" else "max_worker_restarts": 1}
+    with make_evaluator(host, ExitingEnv, num_workers=2, envs_per_worker=1, **restarts) as evaluator:
+        with pytest.raises(type(error), match=str(error)) as info:
+            evaluator.evaluate(policy, population, population[0], 1, seed=0)
+        assert "in step" in str(info.value.__cause__)  # the worker's traceback
+        assert evaluator.restarted_workers == 0
+        assert workers(evaluator) == []
+        with pytest.raises(type(error), match=str(error)) as info:
+            evaluator.call_workers(exit_in_call)
+        assert "in exit_in_call" in str(info.value.__cause__)
+        assert evaluator.restarted_workers == 0
 
 
 def test_faults(host: str, tmp_path: Path, caplog: pytest.LogCaptureFixture, monkeypatch: pytest.MonkeyPatch) -> None:

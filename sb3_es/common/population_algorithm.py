@@ -209,6 +209,17 @@ class PopulationAlgorithm(StrategyAlgorithm):
                 self._evaluator.close()
                 self._evaluator = None
 
+    def close(self) -> None:
+        """
+        Stop the worker processes or Ray actors that the model built for ``evaluator="processes"`` or ``"ray"``
+        (they idle between ``learn()`` calls, and would stop only when the model is garbage-collected or at exit);
+        the next ``learn()`` starts new ones. An evaluator instance passed as ``evaluator=`` is its owner's to close,
+        and the env is closed with ``model.env.close()``, as in SB3.
+        """
+        if self.evaluator in ("processes", "ray") and self._evaluator is not None:
+            self._evaluator.close()
+            self._evaluator = None
+
     # ------------------------------------------------------------------ training
     def _init_callback(self, callback: MaybeCallback, progress_bar: bool = False) -> BaseCallback:
         if progress_bar:  # SB3's bar counts num_envs per call; a generation's last call can stand for fewer

@@ -3,7 +3,8 @@
 A worker builds its envs (a :class:`~sb3_es.evaluation.worker.ShareRunner`), says it is ready, then serves the
 driver's calls over its pipe: run a share (lingering signalled by ``("done", token)`` and ended by a shared
 integer), keep a noise table, call a function on its VecEnv. An exception is sent back with its traceback, and
-re-raised in the driver with that traceback as its cause.
+re-raised in the driver with that traceback as its cause: ``SystemExit`` and ``KeyboardInterrupt`` too (a worker
+ignores ``SIGINT``, so they come from the env's code), which would otherwise end the worker and pass for a crash.
 """
 
 from __future__ import annotations
@@ -77,7 +78,7 @@ def worker_main(conn: Connection, config: bytes, stop: Any, tables: list[SharedN
     try:
         try:
             runner = ShareRunner(cloudpickle.loads(config))
-        except Exception as e:  # e.g. an unknown env id
+        except BaseException as e:  # e.g. an unknown env id; a factory calling sys.exit()
             reply("error", portable(e), traceback.format_exc())
             return
         for table in tables:
@@ -92,13 +93,13 @@ def worker_main(conn: Connection, config: bytes, stop: Any, tables: list[SharedN
                 return
             try:
                 serve(runner, kind, args)
-            except Exception as e:
+            except BaseException as e:  # SystemExit, KeyboardInterrupt too: raised by the env's code, not a crash
                 reply("error", portable(e), traceback.format_exc())
     except (BrokenPipeError, ConnectionResetError):  # the driver is gone
         return
 
 
-def portable(error: Exception) -> Exception:
+def portable(error: BaseException) -> BaseException:
     """
     :return: ``error`` if the driver can rebuild it from its pickle, else a ``RuntimeError`` with its type and
         message (an exception whose ``__init__`` takes other arguments than its ``args`` cannot be rebuilt).

@@ -37,8 +37,8 @@ from typing_extensions import Unpack
 
 from sb3_es.evaluation.pool import WorkerDied, WorkerPool
 from sb3_es.evaluation.process_worker import DRIVER_ENDS, raise_remote, worker_main
-from sb3_es.evaluation.sharded import ShardedEvaluator
-from sb3_es.evaluation.worker import DEFAULT_ENVS_PER_WORKER, WorkerEnvArgs, env_config
+from sb3_es.evaluation.sharded import ShardedEvaluator, wait_pieces
+from sb3_es.evaluation.worker import DEFAULT_ENVS_PER_WORKER, RESTARTS_ARGUMENTS, WorkerEnvArgs, env_config
 from sb3_es.strategies.noise import SharedNoiseTable
 
 
@@ -62,6 +62,15 @@ def _sigint_deferred() -> Iterator[None]:
             signal.raise_signal(signal.SIGINT)
 
 
+def _wait(handles: list[Any], timeout: float | None) -> list[Any]:
+    """:return: ``multiprocessing.connection.wait(handles, timeout)``, for any ``timeout`` (``None``, ``math.inf``)."""
+    for piece in wait_pieces(timeout):
+        ready = wait(handles, piece)
+        if ready:
+            return ready
+    return []
+
+
 class ProcessPool(WorkerPool):
     """
     Worker processes running a :class:`~sb3_es.evaluation.worker.ShareRunner` each.
@@ -69,7 +78,7 @@ class ProcessPool(WorkerPool):
     :param config: Env config of every worker.
     :param num_workers: Number of processes.
     :param start_method: ``multiprocessing`` start method.
-    :param start_timeout: Seconds to wait for a worker to build its envs.
+    :param start_timeout: Seconds to wait for a worker to build its envs (``math.inf``: no limit).
     """
 
     def __init__(self, config: dict[str, Any], num_workers: int, start_method: str, start_timeout: float) -> None:
@@ -143,7 +152,7 @@ class ProcessPool(WorkerPool):
     def _receive(self, k: int, timeout: float | None) -> tuple[Any, ...]:
         """:return: Worker ``k``'s next message. :raises WorkerDied: if it ended; ``TimeoutError``."""
         conn, process = self._conns[k], self.processes[k]
-        if not wait([conn, process.sentinel], timeout):
+        if not _wait([conn, process.sentinel], timeout):
             raise TimeoutError(f"worker process {k} did not reply within {timeout} s")
         try:
             if conn.poll():
@@ -197,7 +206,7 @@ class ProcessPool(WorkerPool):
                     return k, None
             remaining = None if deadline is None else max(0.0, deadline - time.monotonic())
             handles = {self._conns[k]: k for k in ks} | {self.processes[k].sentinel: k for k in ks}
-            ready = wait(list(handles), remaining)
+            ready = _wait(list(handles), remaining)
             if not ready:
                 raise TimeoutError(f"no worker process finished its share within {timeout} s")
             k = handles[ready[0]]
@@ -305,7 +314,8 @@ class ProcessEvaluator(ShardedEvaluator):
     reproducible too, at the cost of idle workers at the end of each generation). An env that ``reset(seed=...)``
     does not restore completely (BipedalWalker-v3 keeps its Box2D world) is reproducible only with ``linger=False``.
 
-    An exception raised by the env in a worker is raised in the driver with the worker's traceback as its cause;
+    An exception raised by the env in a worker (``SystemExit`` and ``KeyboardInterrupt`` too: the workers ignore
+    ``SIGINT``, so those come from the env's code) is raised in the driver with the worker's traceback as its cause;
     an error or ``KeyboardInterrupt`` during a generation kills the workers (fresh ones start at the next
     evaluation). The workers are stopped by :meth:`close`, the ``with`` statement, garbage collection of the
     evaluator, or the driver's exit. Not saved with the model.
@@ -319,8 +329,8 @@ class ProcessEvaluator(ShardedEvaluator):
         Pendulum-v1; with four, at 94-98%).
     :param start_method: ``multiprocessing`` start method; by default ``"fork"`` on Linux, else ``"spawn"``.
     :param max_worker_restarts: Worker replacements allowed within one generation.
-    :param start_timeout: Seconds to wait for a worker to build its envs.
-    :param generation_timeout: Seconds a generation may take (``None``: no limit).
+    :param start_timeout: Seconds to wait for a worker to build its envs (``math.inf``: no limit).
+    :param generation_timeout: Seconds a generation may take (``None`` or ``math.inf``: no limit).
     :param linger: Whether a worker whose share is done runs the center policy until every share is done.
     :param env_args: ``make_vec_env``'s other arguments for each worker's VecEnv: ``wrapper_class``, ``env_kwargs``,
         ``wrapper_kwargs``, ``vec_env_cls`` (``DummyVecEnv`` by default), ``vec_env_kwargs``, ``monitor_kwargs``
@@ -329,7 +339,7 @@ class ProcessEvaluator(ShardedEvaluator):
 
     worker_name = "worker process"
     workers_name = "worker processes"
-    restarts_argument = "max_worker_restarts"
+    restarts_argument = RESTARTS_ARGUMENTS["ProcessEvaluator"]
 
     def __init__(
         self,
@@ -351,7 +361,7 @@ class ProcessEvaluator(ShardedEvaluator):
                 "own. Each worker is a process already: ask for more of them (num_workers=) and leave vec_env_cls "
                 "to its default (DummyVecEnv)."
             )
-        config = env_config(env, envs_per_worker, **env_args)
+        config = env_config(env, envs_per_worker, self.restarts_argument, **env_args)
         super().__init__(config, num_workers, start_timeout, max_worker_restarts, generation_timeout, linger)
         start_method = start_method or default_start_method()
         if start_method not in mp.get_all_start_methods():

@@ -28,16 +28,48 @@ from typing_extensions import Unpack
 
 from sb3_es.evaluation import ray_session
 from sb3_es.evaluation.pool import WorkerDied, WorkerPool
-from sb3_es.evaluation.ray_actor import remote_worker_class
+from sb3_es.evaluation.ray_actor import EnvExit, remote_worker_class
 from sb3_es.evaluation.ray_session import import_ray
-from sb3_es.evaluation.sharded import ShardedEvaluator
-from sb3_es.evaluation.worker import DEFAULT_ENVS_PER_WORKER, WorkerEnvArgs, env_config
+from sb3_es.evaluation.sharded import ShardedEvaluator, wait_pieces
+from sb3_es.evaluation.worker import DEFAULT_ENVS_PER_WORKER, RESTARTS_ARGUMENTS, WorkerEnvArgs, env_config
+from sb3_es.strategies.base import check_positive_number
 from sb3_es.strategies.noise import SharedNoiseTable
 
 
 def _died(error: Exception) -> WorkerDied:
     message = str(error).splitlines()[0] if str(error) else ""
     return WorkerDied(f"{type(error).__name__}: {message}")
+
+
+def _get(refs: Any) -> Any:
+    """
+    :return: ``ray.get(refs)``; a ``SystemExit`` or ``KeyboardInterrupt`` of the env code in an actor (an
+        :class:`~sb3_es.evaluation.ray_actor.EnvExit`) is raised as itself, with Ray's error (the actor's traceback)
+        as its cause.
+    """
+    from ray.exceptions import RayTaskError
+
+    try:
+        return import_ray().get(refs)
+    except RayTaskError as e:
+        if isinstance(e.cause, EnvExit):
+            raise e.cause.error from e
+        raise
+
+
+def _wait(refs: list[Any], num_returns: int, timeout: float | None) -> tuple[list[Any], list[Any]]:
+    """
+    :return: ``ray.wait(refs, num_returns=num_returns, timeout=timeout)``, for any ``timeout`` (``None`` or
+        ``math.inf``: no limit; Ray refuses ``math.inf``, and ends a wait without a timeout after about 11 days).
+    """
+    ray = import_ray()
+    ready: list[Any] = []
+    not_ready = list(refs)
+    for piece in wait_pieces(timeout):
+        ready, not_ready = ray.wait(refs, num_returns=num_returns, timeout=piece)
+        if len(ready) >= num_returns:
+            break
+    return ready, not_ready
 
 
 class RayActorPool(WorkerPool):
@@ -48,7 +80,7 @@ class RayActorPool(WorkerPool):
     :param num_workers: Number of actors, or ``None`` for one per CPU free in the cluster at start.
     :param num_cpus_per_worker: CPUs reserved by each actor.
     :param init_kwargs: Keyword arguments for ``ray.init`` if Ray is not running.
-    :param start_timeout: Seconds to wait for actors to start.
+    :param start_timeout: Seconds to wait for actors to start (``math.inf``: no limit).
     """
 
     def __init__(
@@ -115,10 +147,9 @@ class RayActorPool(WorkerPool):
         return cls.options(num_cpus=self.num_cpus_per_worker, max_restarts=0).remote(self.config)
 
     def _wait_ready(self, actors: Sequence[Any]) -> None:
-        ray = import_ray()
         refs = [actor.ready.remote() for actor in actors]
-        ready, not_ready = ray.wait(refs, num_returns=len(refs), timeout=self.start_timeout)
-        ray.get(ready)  # raises an actor's construction error (e.g. an unknown env id)
+        ready, not_ready = _wait(refs, len(refs), self.start_timeout)
+        _get(ready)  # raises an actor's construction error (e.g. an unknown env id)
         if not_ready:
             raise RuntimeError(
                 f"Ray could not start {len(not_ready)} of {len(refs)} actor(s) within start_timeout="
@@ -177,17 +208,16 @@ class RayActorPool(WorkerPool):
     def wait_share_done(self, ks: Sequence[int], timeout: float | None) -> tuple[int, WorkerDied | None]:
         from ray.exceptions import RayActorError
 
-        ray = import_ray()
         # The share's result too: an evaluation that failed before the share began (its arguments could not be
         # unpickled in the actor) never signals the share done; its error is raised here.
         refs = {self._done_refs[k]: k for k in ks} | {self._eval_refs[k]: k for k in ks}
-        ready, _ = ray.wait(list(refs), num_returns=1, timeout=timeout)
+        ready, _ = _wait(list(refs), 1, timeout)
         if not ready:
             raise TimeoutError(f"no Ray actor finished its share within {timeout} s")
         k = refs[ready[0]]
         try:
-            if ray.get(ready[0]) is False:  # the evaluation ended without the share done: its error is raised here
-                ray.get(self._eval_refs[k])
+            if _get(ready[0]) is False:  # the evaluation ended without the share done: its error is raised here
+                _get(self._eval_refs[k])
         except RayActorError as e:
             return k, _died(e)
         return k, None
@@ -196,14 +226,15 @@ class RayActorPool(WorkerPool):
         self.actors[k].stop.options(concurrency_group="signal").remote(token)
 
     def result(self, k: int, timeout: float | None) -> dict[str, Any]:
-        from ray.exceptions import GetTimeoutError, RayActorError
+        from ray.exceptions import RayActorError
 
+        ready, _ = _wait([self._eval_refs[k]], 1, timeout)
+        if not ready:
+            raise TimeoutError(f"Ray actor {k} did not return its share within {timeout} s")
         try:
-            return import_ray().get(self._eval_refs[k], timeout=timeout)
+            return _get(ready[0])
         except RayActorError as e:
             raise _died(e) from e
-        except GetTimeoutError as e:
-            raise TimeoutError(f"Ray actor {k} did not return its share within {timeout} s") from e
 
     def replace(self, k: int) -> None:
         with contextlib.suppress(Exception):  # it is dead already
@@ -213,7 +244,7 @@ class RayActorPool(WorkerPool):
         self._wait_ready([self.actors[k]])
 
     def call(self, fn: Callable[[VecEnv], Any]) -> list[Any]:
-        return import_ray().get([actor.call.remote(fn) for actor in self.actors])
+        return _get([actor.call.remote(fn) for actor in self.actors])
 
 
 class RayEvaluator(ShardedEvaluator):
@@ -223,7 +254,9 @@ class RayEvaluator(ShardedEvaluator):
 
     Shares and seeds, lingering, the callback replay and fault tolerance are those of
     :class:`~sb3_es.evaluation.sharded.ShardedEvaluator` (see there); a dead actor is counted in
-    :attr:`restarted_actors`, at most ``max_actor_restarts`` times per generation.
+    :attr:`restarted_actors`, at most ``max_actor_restarts`` times per generation. An exception raised by the env
+    or policy code in an actor is raised in the driver (a ``SystemExit`` or ``KeyboardInterrupt`` as itself, with
+    Ray's error, holding the actor's traceback, as its cause).
 
     Ray is started with ``ray.init(**ray_init_kwargs)`` if it is not running yet (pass
     ``ray_init_kwargs=dict(address="auto")`` to join a running cluster, or call ``ray.init`` yourself first).
@@ -243,8 +276,9 @@ class RayEvaluator(ShardedEvaluator):
     :param num_cpus_per_worker: CPUs reserved by each actor (``ray.remote(num_cpus=...)``).
     :param ray_init_kwargs: Keyword arguments for ``ray.init`` when this evaluator starts Ray.
     :param max_actor_restarts: Actor replacements allowed within one generation.
-    :param start_timeout: Seconds to wait for actors to start (at the first evaluation, and for a replacement).
-    :param generation_timeout: Seconds a generation may take (``None``: no limit); see
+    :param start_timeout: Seconds to wait for actors to start (at the first evaluation, and for a replacement);
+        ``math.inf`` for no limit.
+    :param generation_timeout: Seconds a generation may take (``None`` or ``math.inf``: no limit); see
         :class:`~sb3_es.evaluation.sharded.ShardedEvaluator`.
     :param linger: Whether finished actors run the center policy while the others finish their shares (``False``
         makes ``num_timesteps`` reproducible, at the cost of idle actors); see
@@ -256,7 +290,7 @@ class RayEvaluator(ShardedEvaluator):
 
     worker_name = "Ray actor"
     workers_name = "Ray actors"
-    restarts_argument = "max_actor_restarts"
+    restarts_argument = RESTARTS_ARGUMENTS["RayEvaluator"]
 
     def __init__(
         self,
@@ -273,11 +307,9 @@ class RayEvaluator(ShardedEvaluator):
         **env_args: Unpack[WorkerEnvArgs],
     ) -> None:
         import_ray()
-        config = env_config(env, envs_per_worker, **env_args)
+        config = env_config(env, envs_per_worker, self.restarts_argument, **env_args)
         super().__init__(config, num_workers, start_timeout, max_actor_restarts, generation_timeout, linger)
-        if not num_cpus_per_worker > 0:
-            raise ValueError(f"num_cpus_per_worker={num_cpus_per_worker}: it must be positive.")
-        self.num_cpus_per_worker = float(num_cpus_per_worker)
+        self.num_cpus_per_worker = check_positive_number("num_cpus_per_worker", num_cpus_per_worker)
         self.ray_init_kwargs = dict(ray_init_kwargs or {})
 
     @property

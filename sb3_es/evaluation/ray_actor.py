@@ -6,12 +6,17 @@ second concurrency group: while :meth:`RayWorker.evaluate` runs, the driver call
 (ends the lingering), both in the ``signal`` group, so they run beside ``evaluate``. Ray does not order calls of
 different groups: ``stop`` and ``jobs_done`` may run before ``evaluate`` starts or after it returned, and the
 protocol holds either way.
+
+A ``SystemExit`` or ``KeyboardInterrupt`` raised by the env or policy code is carried to the driver as an
+:class:`EnvExit`: Ray would take the first for the actor's own exit (a dead actor, replaced and its share re-run
+until ``max_actor_restarts``, the error lost) and the second for a cancellation (``TaskCancelledError``).
 """
 
 from __future__ import annotations
 
+import contextlib
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from typing import Any
 
 import numpy as np
@@ -19,6 +24,28 @@ from stable_baselines3.common.vec_env import VecEnv
 
 from sb3_es.evaluation.ray_session import import_ray
 from sb3_es.evaluation.worker import ShareRunner
+
+
+class EnvExit(Exception):
+    """
+    A ``SystemExit`` or ``KeyboardInterrupt`` raised by the env or policy code in an actor, as an exception Ray
+    sends back as it does any other (the driver raises :attr:`error` again).
+
+    :param error: The exception raised.
+    """
+
+    def __init__(self, error: BaseException) -> None:
+        super().__init__(error)
+        self.error = error
+
+
+@contextlib.contextmanager
+def _carrying_exits() -> Iterator[None]:
+    """Raise a ``SystemExit`` or ``KeyboardInterrupt`` of the block as an :class:`EnvExit`."""
+    try:
+        yield
+    except (SystemExit, KeyboardInterrupt) as e:
+        raise EnvExit(e) from e
 
 
 class _Generation:
@@ -48,7 +75,8 @@ class RayWorker:
         import torch as th
 
         th.set_num_threads(1)  # actors share the machine's cores
-        self.runner = ShareRunner(config)
+        with _carrying_exits():
+            self.runner = ShareRunner(config)
         self._generations: dict[int, _Generation] = {}
         # The latest generation token whose evaluation has returned (the driver's tokens grow): signals for it or an
         # earlier one come too late and are answered at once.
@@ -103,12 +131,14 @@ class RayWorker:
             :meth:`jobs_done` and keeps running the center policy in all slots until :meth:`stop` is called.
         """
         if token is None:
-            return self.runner.run(payload, jobs, seed)
+            with _carrying_exits():
+                return self.runner.run(payload, jobs, seed)
         generation = self._generation(token)
         if generation is None:
             raise RuntimeError(f"generation {token} was evaluated already by this actor")
         try:
-            return self.runner.run(payload, jobs, seed, generation.done, lambda: not generation.stop.is_set())
+            with _carrying_exits():
+                return self.runner.run(payload, jobs, seed, generation.done, lambda: not generation.stop.is_set())
         finally:
             with self._lock:
                 self._finished = max(self._finished, token)
@@ -117,7 +147,8 @@ class RayWorker:
 
     def call(self, fn: Callable[[VecEnv], Any]) -> Any:
         """:return: ``fn(vec_env)``, run in the actor."""
-        return fn(self.runner.env)
+        with _carrying_exits():
+            return fn(self.runner.env)
 
 
 _REMOTE_WORKER: Any = None

@@ -12,10 +12,11 @@ from __future__ import annotations
 
 import itertools
 import logging
+import math
 import time
 import weakref
 from abc import ABC, abstractmethod
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from typing import Any
 
 import numpy as np
@@ -24,7 +25,7 @@ from stable_baselines3.common.vec_env import VecEnv
 from sb3_es.evaluation.base import Generation, PopulationEvaluator, PopulationResult, StepHook
 from sb3_es.evaluation.pool import WorkerDied, WorkerPool
 from sb3_es.evaluation.replay import replay
-from sb3_es.strategies.base import check_count, check_flag
+from sb3_es.strategies.base import check_count, check_flag, check_number
 from sb3_es.strategies.noise import NoiseTablePopulation
 
 logger = logging.getLogger(__name__)
@@ -32,9 +33,44 @@ logger = logging.getLogger(__name__)
 #: Names the lingering signals of each generation (unique in the process, shared pools included).
 _TOKENS = itertools.count(1)
 
+#: The longest single wait, in seconds, that the hosts hand to the OS or Ray: ``poll`` refuses more than about 24
+#: days (``OverflowError``), Ray's ``wait`` refuses ``math.inf`` and gives up after about 11 days without a timeout.
+#: Longer waits are made of such pieces (see :func:`wait_pieces`).
+MAX_WAIT = 86400.0
+
 
 def _remaining(deadline: float | None) -> float | None:
     return None if deadline is None else max(0.0, deadline - time.monotonic())
+
+
+def wait_pieces(timeout: float | None) -> Iterator[float]:
+    """
+    Cut a wait of any length into waits that the OS and Ray take.
+
+    :param timeout: Seconds to wait; ``None`` or ``math.inf`` for no limit.
+    :return: The timeouts of the pieces, each at most :data:`MAX_WAIT`, the last one ending when ``timeout`` is
+        over (without a limit, there is no last one): wait for each in turn, until one ends with something ready.
+    """
+    deadline = math.inf if timeout is None else time.monotonic() + timeout
+    while True:
+        remaining = max(0.0, deadline - time.monotonic())
+        yield min(remaining, MAX_WAIT)
+        if remaining <= MAX_WAIT:
+            return
+
+
+def check_timeout(name: str, value: Any, no_limit: str = "math.inf") -> float:
+    """
+    :param name: Argument name, for the message.
+    :param value: A number of seconds, ``math.inf`` for no limit.
+    :param no_limit: What the argument takes for no limit, for the message.
+    :return: ``value`` as a float.
+    :raises ValueError: Naming ``name`` when ``value`` is not above 0 (``nan`` included); ``TypeError``: no number.
+    """
+    seconds = check_number(name, value)
+    if not seconds > 0:
+        raise ValueError(f"{name}={value!r}: give a positive number of seconds ({no_limit} for no limit).")
+    return seconds
 
 
 class ShardedEvaluator(PopulationEvaluator, ABC):
@@ -68,16 +104,16 @@ class ShardedEvaluator(PopulationEvaluator, ABC):
     Faults: a worker that dies (process killed, node lost, crash in native code) is replaced and its share re-run
     with the same seed; the event is logged (``logging`` warning) and counted in :attr:`restarted_workers`; more
     than ``max_restarts`` replacements in one generation raise an error. An exception raised by the env or policy
-    code in a worker is not retried: it is raised here. An error or ``KeyboardInterrupt`` during a generation stops
-    the workers (fresh ones start at the next evaluation).
+    code in a worker (``SystemExit`` and ``KeyboardInterrupt`` too) is not retried: it is raised here. An error or
+    ``KeyboardInterrupt`` during a generation stops the workers (fresh ones start at the next evaluation).
 
     :param config: The workers' env config (see :func:`~sb3_es.evaluation.worker.env_config`).
     :param num_workers: Number of workers (``None``: the host's default).
-    :param start_timeout: Seconds to wait for workers to start.
+    :param start_timeout: Seconds to wait for workers to start; ``math.inf`` for no limit.
     :param max_restarts: Worker replacements allowed within one generation.
     :param generation_timeout: Seconds a generation may take before the workers are stopped and ``TimeoutError``
-        is raised; ``None`` for no limit. The start of a replacement for a dead worker is not counted (it is
-        bounded by ``start_timeout``).
+        is raised; ``None`` (or ``math.inf``, kept as ``None``) for no limit. The start of a replacement for a dead
+        worker is not counted (it is bounded by ``start_timeout``).
     :param linger: Whether finished workers run the center policy while the others finish their shares.
     """
 
@@ -98,17 +134,18 @@ class ShardedEvaluator(PopulationEvaluator, ABC):
     ) -> None:
         if num_workers is not None:
             num_workers = check_count("num_workers", num_workers)
-        if not start_timeout > 0:
-            raise ValueError(f"start_timeout={start_timeout}: give a positive number of seconds.")
+        start_timeout = check_timeout("start_timeout", start_timeout)
         max_restarts = check_count(self.restarts_argument, max_restarts, minimum=0)
-        if generation_timeout is not None and not generation_timeout > 0:
-            raise ValueError(f"generation_timeout={generation_timeout}: give a positive number of seconds, or None.")
+        if generation_timeout is not None:
+            generation_timeout = check_timeout("generation_timeout", generation_timeout, "None or math.inf")
+            if math.isinf(generation_timeout):
+                generation_timeout = None
         self._env_config = config
         #: The env id or factory the workers build their envs from.
         self.env = config["env"]
         self.envs_per_worker = int(config["n_envs"])
         self._num_workers = num_workers
-        self.start_timeout = float(start_timeout)
+        self.start_timeout = start_timeout
         self.max_restarts = max_restarts
         self.generation_timeout = generation_timeout
         self.linger = check_flag("linger", linger)

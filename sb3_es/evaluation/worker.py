@@ -37,6 +37,10 @@ from sb3_es.strategies.noise import noise_rows
 #: 2-process ``env.step`` loop, 4 slots at 94%/95% and 95%/98%.
 DEFAULT_ENVS_PER_WORKER = 4
 
+#: Each sharded evaluator's argument for the replacements of dead workers within a generation (each names its
+#: workers its own way): given the other's, an evaluator says which it takes.
+RESTARTS_ARGUMENTS = {"ProcessEvaluator": "max_worker_restarts", "RayEvaluator": "max_actor_restarts"}
+
 
 def make_env_fn(env: str | Callable[..., gym.Env]) -> Callable[..., gym.Env]:
     """
@@ -82,13 +86,18 @@ class WorkerEnvArgs(TypedDict, total=False):
 
 
 def env_config(
-    env: str | Callable[..., gym.Env], envs_per_worker: int, **env_args: Unpack[WorkerEnvArgs]
+    env: str | Callable[..., gym.Env],
+    envs_per_worker: int,
+    restarts_argument: str | None = None,
+    **env_args: Unpack[WorkerEnvArgs],
 ) -> dict[str, Any]:
     """
     Check the env arguments of a sharded evaluator and gather them for :class:`ShareRunner`.
 
     :param env: Env id or picklable env factory.
     :param envs_per_worker: Env slots of each worker's VecEnv.
+    :param restarts_argument: The evaluator's argument for worker replacements (one of
+        :data:`RESTARTS_ARGUMENTS`), named when the other evaluator's is given.
     :param env_args: The other keyword arguments of ``make_vec_env`` (see :class:`WorkerEnvArgs`).
     :return: The keyword arguments of ``make_vec_env``, with the env id or factory under ``"env"``.
     """
@@ -99,6 +108,12 @@ def env_config(
         )
     envs_per_worker = check_count("envs_per_worker", envs_per_worker)
     unknown = sorted(set(env_args) - set(WorkerEnvArgs.__annotations__))
+    for evaluator, argument in RESTARTS_ARGUMENTS.items():
+        if argument in unknown and restarts_argument is not None:
+            raise TypeError(
+                f"Unexpected keyword argument {argument}: that is {evaluator}'s; this evaluator's is "
+                f"{restarts_argument} (the replacements of dead workers allowed within one generation)."
+            )
     if unknown:
         raise TypeError(
             f"Unexpected keyword argument(s) {', '.join(unknown)}: the env arguments of a worker are "
