@@ -265,3 +265,8 @@ def test_make_optimizer_names() -> None:
         make_optimizer("rmsprop", [theta], 0.1)  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="max_speed"):
         make_optimizer("adam", [theta], 0.1, max_speed=0.3)
+
+
+def test_an_infinite_step_size_is_refused_as_not_finite() -> None:
+    with pytest.raises(ValueError, match=r"^sigma=inf: it must be a positive number \(a finite one\)\.$"):
+        OpenESStrategy(np.zeros(3), 6, sigma=np.inf, learning_rate=0.05)

@@ -242,7 +242,7 @@ def check_positive_number(name: str, value: Any) -> float:
     """
     number = check_number(name, value)
     if not (np.isfinite(number) and number > 0):
-        raise ValueError(f"{name}={value}: it must be a positive number.")
+        raise ValueError(f"{name}={value}: it must be a positive number{' (a finite one)' if number > 0 else ''}.")
     return number
 
 
