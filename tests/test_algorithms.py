@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 from algorithms import (
     ALGORITHMS,
+    CARTPOLE_CASES,
     POPULATION_ALGORITHMS,
     Algo,
     GenerationRecorder,
@@ -72,12 +73,12 @@ def test_shared_parameters_reach_the_base_class(algo: Algo, tmp_path: Path) -> N
 
 
 # ---------------------------------------------------------------------------- learning
-@pytest.mark.parametrize("algo", ALGORITHMS)
-def test_learns_cartpole(algo: Algo) -> None:
-    """Budgets and seeds: ``envs.ALGOS`` (a few seconds each on 2 CPU cores)."""
+@pytest.mark.parametrize(("algo", "policy", "kwargs", "steps"), CARTPOLE_CASES)
+def test_learns_cartpole(algo: Algo, policy: str, kwargs: dict[str, Any], steps: int) -> None:
+    """Each algorithm, and the options whose learning is checked too: ``algorithms.CARTPOLE_CASES``."""
     env = make_vec_env("CartPole-v1", n_envs=algo.cartpole_envs, seed=0)
-    model = algo.cls(algo.policy, env, **{**algo.defaults, "seed": 0, **algo.cartpole})
-    model.learn(algo.cartpole_steps)
+    model = algo.cls(policy, env, **{**algo.defaults, "seed": 0, **kwargs})
+    model.learn(steps)
     eval_env = make_vec_env("CartPole-v1", n_envs=1, seed=123)
     mean_return, _ = evaluate_policy(model, eval_env, n_eval_episodes=10, deterministic=True)
     assert mean_return >= 475

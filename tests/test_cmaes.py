@@ -1,7 +1,8 @@
-"""What is specific to CMA-ES: logged values, pycma state in save/load and resume, private random state,
-covariance and population size, stop conditions and restarts, pycma options, errors.
+"""What is specific to CMA-ES: logged values, pycma state in save/load, private random state, covariance and
+population size, stop conditions and restarts, pycma options, errors.
 
-What every algorithm does (learning, step accounting, callbacks, logging) is in ``test_algorithms.py``.
+What every algorithm does (learning, step accounting, callbacks, logging) is in ``test_algorithms.py``; exact
+resumption, pycma's state included (``algorithms.cma_state``), full and separable, in ``test_save_load.py``.
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from algorithms import check_resume, learn_logged, pendulum_env, spy_on_ask
+from algorithms import assert_identical, cma_state, covariance, learn_logged, pendulum_env, policy_state, spy_on_ask
 from envs import read_csv
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.env_util import make_vec_env
@@ -40,25 +41,14 @@ def pendulum_model(**kwargs: Any) -> CMAES:
     return CMAES("LinearPolicy", pendulum_env(), **{"seed": 0, **kwargs})
 
 
-def covariance(strategy: CMAESStrategy) -> np.ndarray:
-    """The full covariance matrix, or the diagonal of separable CMA-ES."""
-    es = strategy.es
-    return np.asarray(es.sm.C if hasattr(es.sm, "C") else es.dC)
-
-
 def spy_on_population_sizes(model: CMAES) -> list[tuple[int, float]]:
     """Record (population size, sigma) of every generation asked."""
     return spy_on_ask(model, lambda strategy, _: (strategy.population_size, strategy.sigma))
 
 
 def assert_same_cma_state(a: CMAES, b: CMAES) -> None:
-    np.testing.assert_array_equal(a.policy.parameters_to_vector(), b.policy.parameters_to_vector())
-    for name in ("obs_mean", "obs_var", "obs_count"):
-        np.testing.assert_array_equal(getattr(a.policy, name).numpy(), getattr(b.policy, name).numpy())
-    np.testing.assert_array_equal(a.strategy.es.mean, b.strategy.es.mean)
-    assert a.strategy.es.sigma == b.strategy.es.sigma
-    np.testing.assert_array_equal(covariance(a.strategy), covariance(b.strategy))
-    assert a.strategy.es.countiter == b.strategy.es.countiter
+    assert_identical(policy_state(a), policy_state(b))
+    assert_identical(cma_state(a), cma_state(b))
     np.testing.assert_array_equal(a.strategy.ask(), b.strategy.ask())
 
 
@@ -94,20 +84,6 @@ def test_loaded_strategy_asks_what_the_saved_one_would(tmp_path: Path) -> None:
     expected = model.strategy.ask()
     np.testing.assert_array_equal(CMAES.load(tmp_path / "a.zip").strategy.ask(), expected)
     np.testing.assert_array_equal(CMAES.load(tmp_path / "b.zip").strategy.ask(), expected)
-
-
-@pytest.mark.parametrize("diagonal", [False, True])
-def test_resume_restores_the_pycma_state(diagonal: bool, tmp_path: Path) -> None:
-    """The generic check (``test_save_load.py``), then pycma's own state: mean, step size, covariance, iterations;
-    for the full covariance and for separable CMA-ES (what ``diagonal="auto"`` picks for large policies)."""
-    straight, resumed = check_resume(
-        lambda env: CMAES("LinearPolicy", env, diagonal=diagonal, seed=3),
-        pendulum_env,
-        PENDULUM_GENERATION,
-        tmp_path / "half.zip",
-    )
-    assert straight.strategy.diagonal is resumed.strategy.diagonal is diagonal
-    assert_same_cma_state(straight, resumed)
 
 
 class GlobalRandomUser(BaseCallback):

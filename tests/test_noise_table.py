@@ -1,15 +1,16 @@
-"""Shared noise table: ARS and OpenES read perturbations as slices, and save/load keeps the run exact."""
+"""Shared noise table: ARS and OpenES read perturbations as slices; a table too small is refused.
+
+Learning CartPole and exact resumption with a table are cases of the generic tests (``test_algorithms.py``,
+``test_save_load.py``).
+"""
 
 from __future__ import annotations
 
-import inspect
 from pathlib import Path
 
 import numpy as np
 import pytest
-from algorithms import ALGOS, Algo, check_resume
-from stable_baselines3.common.env_util import make_vec_env
-from stable_baselines3.common.evaluation import evaluate_policy
+from algorithms import NOISE_TABLE_ALGORITHMS, Algo
 
 from sb3_es import ARS, OpenES
 from sb3_es.strategies.noise import NoiseTablePopulation
@@ -34,32 +35,6 @@ def test_openes_antithetic_pairs_from_the_table() -> None:
     dense = np.asarray(model._ask())
     center = model.strategy.center
     np.testing.assert_allclose(dense[:3] - center, center - dense[3:], rtol=0, atol=1e-12)
-
-
-#: The algorithms that can read their perturbations from a noise table.
-NOISE_TABLE_ALGORITHMS = [
-    pytest.param(algo, id=algo.name) for algo in ALGOS if "noise_table_size" in inspect.signature(algo.cls).parameters
-]
-
-
-@pytest.mark.parametrize("algo", NOISE_TABLE_ALGORITHMS)
-def test_learns_cartpole_with_a_noise_table(algo: Algo) -> None:
-    model = algo.cls(algo.policy, "CartPole-v1", seed=0, noise_table_size=100_000, **algo.cartpole)
-    model.learn(algo.cartpole_steps)
-    mean, _ = evaluate_policy(model, make_vec_env("CartPole-v1", n_envs=1, seed=123), n_eval_episodes=10)
-    assert mean >= 475
-
-
-@pytest.mark.parametrize("algo", NOISE_TABLE_ALGORITHMS)
-def test_resume_with_a_noise_table_is_exact(algo: Algo, tmp_path: Path) -> None:
-    generation = 4 * 200  # 4 candidates, Pendulum's 200-step episodes, one env
-    straight, resumed = check_resume(
-        lambda env: algo.make(env, 4, noise_table_size=50_000, seed=5),
-        lambda: make_vec_env("Pendulum-v1", n_envs=1, seed=0),
-        generation,
-        tmp_path / "model.zip",
-    )
-    np.testing.assert_array_equal(resumed.strategy.center, straight.strategy.center)
 
 
 def test_bad_noise_table_size() -> None:

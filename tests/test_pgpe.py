@@ -1,7 +1,8 @@
-"""What is specific to PGPE with ClipUp: the strategy's math, defaults, logged values, resume of its state, errors.
+"""What is specific to PGPE with ClipUp: the strategy's math, defaults, logged values, load() overrides, errors.
 
 What every algorithm does (learning, step accounting, callbacks, logging, save/load) is in ``test_algorithms.py``
-and ``test_save_load.py``.
+and ``test_save_load.py``; exact resumption there restores PGPE's stdevs and its optimizer's state too
+(``algorithms.ALGOS``), with ClipUp and with Adam.
 """
 
 from __future__ import annotations
@@ -11,7 +12,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from algorithms import check_resume, learn_logged, pendulum_env
+from algorithms import learn_logged, pendulum_env
 
 from sb3_es import PGPE
 from sb3_es.strategies import ClipUp, PGPEStrategy
@@ -121,38 +122,6 @@ def test_logged_train_values(tmp_path: Path) -> None:
     (row,) = learn_logged(pendulum_model(), PENDULUM_GENERATION, tmp_path)
     assert float(row["train/learning_rate"]) == pytest.approx(0.075)
     assert float(row["train/speed"]) == pytest.approx(0.075)  # first step: lr along the normalized gradient
-
-
-def assert_same_state(a: PGPE, b: PGPE) -> None:
-    np.testing.assert_array_equal(a.policy.parameters_to_vector(), b.policy.parameters_to_vector())
-    np.testing.assert_array_equal(a.strategy.center, b.strategy.center)
-    np.testing.assert_array_equal(a.strategy.stdev, b.strategy.stdev)
-    velocity = [m.strategy.optimizer.state[m.strategy._theta]["velocity"].numpy() for m in (a, b)]
-    np.testing.assert_array_equal(*velocity)
-    np.testing.assert_array_equal(a.strategy.best_params, b.strategy.best_params)
-    assert a.strategy.best_fitness == b.strategy.best_fitness
-    for name in ("obs_mean", "obs_var", "obs_count"):
-        np.testing.assert_array_equal(getattr(a.policy, name).numpy(), getattr(b.policy, name).numpy())
-
-
-@pytest.mark.parametrize("optimizer", ["clipup", "adam"])
-def test_resume_restores_the_strategy_state(tmp_path: Path, optimizer: str) -> None:
-    """The generic check (``test_save_load.py``), then PGPE's own state: stdevs, ClipUp's velocity, best candidate."""
-    kwargs: dict[str, Any] = dict(seed=3, optimizer=optimizer, policy_kwargs=dict(net_arch=[4]))
-    if optimizer == "adam":
-        kwargs["center_learning_rate"] = 0.01
-    straight, resumed = check_resume(
-        lambda env: PGPE("MlpPolicy", env, population_size=POPULATION, **kwargs),
-        pendulum_env,
-        2 * PENDULUM_GENERATION,
-        tmp_path / "half.zip",
-    )
-    assert resumed.optimizer == optimizer
-    if optimizer == "clipup":
-        assert_same_state(straight, resumed)
-    np.testing.assert_array_equal(straight.strategy.stdev, resumed.strategy.stdev)
-    np.testing.assert_array_equal(straight.strategy.ask(), resumed.strategy.ask())
-    assert not np.all(straight.strategy.stdev == 0.1)  # the stdevs adapted, so equality is not trivial
 
 
 def test_load_continues_with_a_smaller_step(tmp_path: Path) -> None:

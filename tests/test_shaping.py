@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 from algorithms import POPULATION_ALGORITHMS, Algo
 from stable_baselines3.common.env_util import make_vec_env
-from stable_baselines3.common.evaluation import evaluate_policy
 
 from sb3_es import ARS
 from sb3_es.evaluation import PopulationResult, RewardShaping, VecEnvEvaluator
@@ -124,10 +123,7 @@ def test_zero_policy_zeroes_only_the_output_layer(algo: Algo) -> None:
     np.testing.assert_array_equal(linear.strategy.center, 0.0)
 
 
-def test_zero_policy_mlp_predicts_zero_at_start_and_then_learns() -> None:
-    """The output layer at zero gives the zero action; the hidden layers give a first-order signal at once."""
+def test_zero_policy_mlp_predicts_zero_at_start() -> None:
+    """The output layer at zero gives the zero action (that it then learns: ``algorithms.CARTPOLE_CASES``)."""
     model = ARS("MlpPolicy", "CartPole-v1", seed=1)
     np.testing.assert_array_equal(model.predict(np.ones(4, dtype=np.float32))[0], 0)  # argmax of zero outputs
-    model.learn(20_000)
-    mean, _ = evaluate_policy(model, make_vec_env("CartPole-v1", n_envs=1, seed=7), n_eval_episodes=10)
-    assert mean >= 475
