@@ -11,6 +11,7 @@ import gc
 import math
 import multiprocessing
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -415,6 +416,20 @@ def test_bad_arguments() -> None:
         ProcessEvaluator("Pendulum-v1", vec_env_cls=SubprocVecEnv)
     with pytest.raises(TypeError, match="linger='False': it must be True or False"):
         ProcessEvaluator("Pendulum-v1", linger="False")  # type: ignore[arg-type]
+    # make_vec_env's arguments of the wrong kind are named now, not by a worker at the first learn().
+    with pytest.raises(TypeError, match=r"vec_env_cls='DummyVecEnv': pass the VecEnv class itself, not its name"):
+        ProcessEvaluator("Pendulum-v1", vec_env_cls="DummyVecEnv")  # type: ignore[arg-type]
+    with pytest.raises(TypeError, match=r"vec_env_cls=<class 'dict'>: pass a VecEnv class .*or None for DummyVecEnv"):
+        ProcessEvaluator("Pendulum-v1", vec_env_cls=dict)  # type: ignore[arg-type]
+    for name in ("env_kwargs", "wrapper_kwargs", "vec_env_kwargs", "monitor_kwargs"):
+        for wrong in ([1], "g=9", [("g", 9.0)]):
+            with pytest.raises(TypeError, match=rf"{name}={re.escape(repr(wrong))}: it must be a dict of keyword"):
+                ProcessEvaluator("Pendulum-v1", **{name: wrong})  # type: ignore[arg-type]
+    with pytest.raises(TypeError, match=r"env_kwargs=\{1: 9.0\}: its keys must be argument names \(strings\), not 1"):
+        ProcessEvaluator("Pendulum-v1", env_kwargs={1: 9.0})  # type: ignore[dict-item]
+    with pytest.raises(TypeError, match=r"wrapper_class=3: it must be a gym.Wrapper class, or a function"):
+        ProcessEvaluator("Pendulum-v1", wrapper_class=3)  # type: ignore[arg-type]
+    assert ProcessEvaluator("Pendulum-v1", env_kwargs={"g": 9.0}, vec_env_cls=DummyVecEnv, wrapper_class=None)
     with pytest.raises(ValueError, match="start_method='thread'"):
         ProcessEvaluator("Pendulum-v1", start_method="thread")
     with pytest.raises(TypeError, match="env_kwarg: the env arguments of a worker are wrapper_class, env_kwargs"):

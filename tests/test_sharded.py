@@ -8,8 +8,9 @@ import logging
 import math
 import os
 import signal
+import sys
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -37,6 +38,7 @@ from sb3_es.evaluation import VecEnvEvaluator, sharded
 from sb3_es.evaluation.process_worker import RemoteTraceback
 from sb3_es.evaluation.processes import ProcessEvaluator
 from sb3_es.evaluation.sharded import ShardedEvaluator
+from sb3_es.evaluation.worker import DEFAULT_ENVS_PER_WORKER
 from sb3_es.strategies.noise import NoiseTablePopulation, SharedNoiseTable
 
 HOSTS = ["processes", pytest.param("ray", marks=pytest.mark.ray)]
@@ -45,7 +47,9 @@ HOSTS = ["processes", pytest.param("ray", marks=pytest.mark.ray)]
 @pytest.fixture(scope="module", params=HOSTS)
 def host(request: pytest.FixtureRequest) -> str:
     if request.param == "ray":
-        request.getfixturevalue("ray_cluster")
+        ray = request.getfixturevalue("ray_cluster")
+        # The envs defined here cannot be imported by Ray workers: ship them by value.
+        ray.cloudpickle.register_pickle_by_value(sys.modules[__name__])
     return request.param
 
 
@@ -70,7 +74,56 @@ def kill_worker(evaluator: ShardedEvaluator, k: int) -> None:
 
 
 def workers(evaluator: ShardedEvaluator) -> list[Any]:
-    return evaluator._workers if isinstance(evaluator, ProcessEvaluator) else evaluator._actors  # type: ignore[attr-defined]
+    if isinstance(evaluator, ProcessEvaluator):
+        return evaluator._workers
+    return evaluator._actors  # type: ignore[attr-defined]
+
+
+class HeldToyEnv(CrashingToyEnv):
+    """
+    ``CrashingToyEnv`` (the first env to reach ``crash_step``, in any worker, dies or raises there) whose other envs
+    wait at that step until the file ``release`` exists: the other workers' shares cannot end before the test says.
+    """
+
+    def __init__(self, release: str, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.release = release
+
+    def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict]:
+        result = super().step(action)
+        if self.steps == self.crash_step:
+            while not os.path.exists(self.release):
+                time.sleep(0.005)
+        return result
+
+
+def share_steps(policy: Any, population: np.ndarray, center: np.ndarray, k: int, n_shares: int = 2) -> int:
+    """:return: The env steps of ToyEnv share ``k`` without lingering (the local engine on a worker's slots)."""
+    share = np.array_split(np.arange(len(population)), n_shares)[k]
+    local = VecEnvEvaluator(make_vec_env(ToyEnv, n_envs=DEFAULT_ENVS_PER_WORKER))
+    return local.evaluate(policy, population[share], center, 1, seed=0).n_steps
+
+
+def stops_delivered(evaluator: ShardedEvaluator, monkeypatch: pytest.MonkeyPatch) -> Callable[[], None]:
+    """
+    :return: A function that waits until the stop-lingering signals sent so far have reached the workers: a worker
+        process's is a shared integer, set at once; a Ray actor's is a call, run when Ray runs it.
+    """
+    if isinstance(evaluator, ProcessEvaluator):
+        return lambda: None
+    import ray
+
+    pool: Any = evaluator.pool
+    sent: list[Any] = []
+
+    def stop_lingering(k: int, token: int) -> None:  # RayActorPool.stop_lingering, keeping the call's reference
+        sent.append(pool.actors[k].stop.options(concurrency_group="signal").remote(token))
+
+    def wait() -> None:
+        ray.get(sent)
+
+    monkeypatch.setattr(pool, "stop_lingering", stop_lingering)
+    return wait
 
 
 @pytest.fixture(scope="module")
@@ -278,47 +331,55 @@ def test_reset_seeds_same_episodes_as_local(host: str) -> None:
 
 def test_no_lingering_after_a_death(host: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """A worker still running its share when another dies does not linger through the replacement's start-up."""
-    crash_flag = str(tmp_path / "crashed")
+    release = str(tmp_path / "release")
     policy = toy_policy()
     population = toy_population(policy, 8, seed=3)
     center = np.zeros(policy.num_params)
     local = VecEnvEvaluator(make_vec_env(ToyEnv, n_envs=2)).evaluate(policy, population, center, 1, seed=0)
 
-    def slow_env() -> CrashingToyEnv:  # a share takes tens of ms; one worker dies at its first steps
-        return CrashingToyEnv(crash_flag, str(tmp_path / "no_error"), crash_step=2, step_seconds=0.002)
+    def held_env() -> HeldToyEnv:  # one worker dies at its second step; the other waits there until released
+        return HeldToyEnv(release, str(tmp_path / "crashed"), str(tmp_path / "no_error"), crash_step=2)
 
-    with make_evaluator(host, slow_env, num_workers=2) as evaluator:
+    with make_evaluator(host, held_env, num_workers=2) as evaluator:
         evaluator.start()
-        replace = evaluator.pool.replace
+        replace, delivered = evaluator.pool.replace, stops_delivered(evaluator, monkeypatch)
+        replaced: list[int] = []
 
-        def slow_replace(k: int) -> None:  # the replacement takes 1 s to start, the survivor's share much less
-            time.sleep(1.0)
+        def replace_after_releasing(k: int) -> None:  # the survivor's share ends while the replacement starts
+            replaced.append(k)
+            delivered()
+            Path(release).touch()
             replace(k)
 
-        monkeypatch.setattr(evaluator.pool, "replace", slow_replace)
+        monkeypatch.setattr(evaluator.pool, "replace", replace_after_releasing)
         result = evaluator.evaluate(policy, population, center, 1, seed=0)
-        assert evaluator.restarted_workers == 1
+        assert evaluator.restarted_workers == 1 and len(replaced) == 1
         assert_same_candidates(result, local)
-        assert sum(evaluator.last_timings["linger_times"]) < 0.5, evaluator.last_timings
+        # Told to stop lingering before its share could end: the survivor ran its share's steps, not one more.
+        survivor = 1 - replaced[0]
+        expected = share_steps(policy, population, center, survivor)
+        assert evaluator.last_timings["n_steps"][survivor] == expected, evaluator.last_timings
 
 
 def test_an_env_error_is_raised_at_once(host: str, tmp_path: Path) -> None:
-    """One worker's env raises at its first step while the other's share takes seconds: the error comes at once,
-    not once the other share is done (nor as a TimeoutError hiding it)."""
+    """One worker's env raises at its first step while the other's share cannot end: the error comes at once, not
+    once the other share is done (nor as a TimeoutError hiding it)."""
+    release = str(tmp_path / "release")
     policy = toy_policy()
     population = toy_population(policy, 8, seed=3)
 
-    def slow_env() -> CrashingToyEnv:
-        return CrashingToyEnv(
-            str(tmp_path / "raised"), str(tmp_path / "no_error"), crash_step=1, step_seconds=0.2, raise_once=True
-        )
+    def held_env() -> HeldToyEnv:
+        return HeldToyEnv(release, str(tmp_path / "raised"), str(tmp_path / "no_error"), crash_step=1, raise_once=True)
 
-    with make_evaluator(host, slow_env, num_workers=2, generation_timeout=2.0) as evaluator:
-        start = time.monotonic()
-        with pytest.raises(ValueError, match="env error raised once inside a worker"):
-            evaluator.evaluate(policy, population, population[0], 1, seed=0)
-        assert time.monotonic() - start < 1.5
-        assert workers(evaluator) == []
+    # The other share waits until released, which comes only after evaluate() has returned: a driver that waited
+    # for it would raise a TimeoutError (after generation_timeout, far above what the error takes to come).
+    try:
+        with make_evaluator(host, held_env, num_workers=2, generation_timeout=120.0) as evaluator:
+            with pytest.raises(ValueError, match="env error raised once inside a worker"):
+                evaluator.evaluate(policy, population, population[0], 1, seed=0)
+            assert workers(evaluator) == []
+    finally:
+        Path(release).touch()
 
 
 def test_a_replacements_start_is_not_counted_in_generation_timeout(
@@ -390,38 +451,40 @@ def test_an_exit_raised_by_the_env_is_raised_not_retried(host: str, error: BaseE
 
 
 def test_faults(host: str, tmp_path: Path, caplog: pytest.LogCaptureFixture, monkeypatch: pytest.MonkeyPatch) -> None:
-    crash_flag, error_flag = str(tmp_path / "crashed"), str(tmp_path / "error")
+    crash_flag, error_flag, release = str(tmp_path / "crashed"), str(tmp_path / "error"), str(tmp_path / "release")
     policy = toy_policy()
     population = toy_population(policy, 8, seed=3)
     center = np.zeros(policy.num_params)
     local = VecEnvEvaluator(make_vec_env(ToyEnv, n_envs=2)).evaluate(policy, population, center, 1, seed=0)
 
-    def crashing_env() -> CrashingToyEnv:
-        return CrashingToyEnv(crash_flag, error_flag)
+    def crashing_env() -> HeldToyEnv:
+        return HeldToyEnv(release, crash_flag, error_flag, crash_step=2)
 
     with make_evaluator(host, crashing_env, num_workers=2) as evaluator:
-        # One worker's process dies mid-generation: it is replaced and its share re-run. The replacement takes
-        # a while to start (here 1 s more); the worker that is done stops lingering meanwhile, or its center-policy
-        # steps (tens of thousands per second on ToyEnv) would all count. The bound is on the time spent lingering,
-        # half the replacement's start-up, since a step count would measure the driver's scheduling delay on a busy
-        # machine. A dead worker process is seen at once (its sentinel); a dead Ray actor only when its raylet
-        # notices, the others lingering till then, so the bound is checked on processes.
-        replace = evaluator.pool.replace
+        # One worker's process dies mid-generation: it is replaced and its share re-run. The other worker's share
+        # is held until the driver, having seen the death, starts the replacement: told at once to stop lingering,
+        # it runs no center-policy steps while the replacement starts and re-runs the dead worker's share (tens of
+        # thousands per second on ToyEnv would count otherwise).
+        replace, delivered = evaluator.pool.replace, stops_delivered(evaluator, monkeypatch)
+        replaced: list[int] = []
 
-        def slow_replace(k: int) -> None:
-            time.sleep(1.0)
+        def replace_after_releasing(k: int) -> None:
+            replaced.append(k)
+            delivered()
+            Path(release).touch()
             replace(k)
 
-        monkeypatch.setattr(evaluator.pool, "replace", slow_replace)
+        monkeypatch.setattr(evaluator.pool, "replace", replace_after_releasing)
         with caplog.at_level(logging.WARNING):
             result = evaluator.evaluate(policy, population, center, 1, seed=0)
         monkeypatch.undo()
         assert os.path.exists(crash_flag)
-        assert evaluator.restarted_workers == 1
+        assert evaluator.restarted_workers == 1 and len(replaced) == 1
         assert any("died" in record.getMessage() for record in caplog.records)
         assert_same_candidates(result, local)
-        if host == "processes":
-            assert sum(evaluator.last_timings["linger_times"]) < 0.5, evaluator.last_timings
+        survivor = 1 - replaced[0]
+        expected = share_steps(policy, population, center, survivor)
+        assert evaluator.last_timings["n_steps"][survivor] == expected, evaluator.last_timings
 
         # A worker killed between generations is replaced too.
         kill_worker(evaluator, 1)

@@ -31,7 +31,13 @@ from sb3_es.evaluation.pool import WorkerDied, WorkerPool
 from sb3_es.evaluation.ray_actor import EnvExit, remote_worker_class
 from sb3_es.evaluation.ray_session import import_ray
 from sb3_es.evaluation.sharded import ShardedEvaluator, wait_pieces
-from sb3_es.evaluation.worker import DEFAULT_ENVS_PER_WORKER, RESTARTS_ARGUMENTS, WorkerEnvArgs, env_config
+from sb3_es.evaluation.worker import (
+    DEFAULT_ENVS_PER_WORKER,
+    RESTARTS_ARGUMENTS,
+    WorkerEnvArgs,
+    check_kwargs,
+    env_config,
+)
 from sb3_es.strategies.base import check_positive_number
 from sb3_es.strategies.noise import SharedNoiseTable
 
@@ -310,7 +316,7 @@ class RayEvaluator(ShardedEvaluator):
         config = env_config(env, envs_per_worker, self.restarts_argument, **env_args)
         super().__init__(config, num_workers, start_timeout, max_actor_restarts, generation_timeout, linger)
         self.num_cpus_per_worker = check_positive_number("num_cpus_per_worker", num_cpus_per_worker)
-        self.ray_init_kwargs = dict(ray_init_kwargs or {})
+        self.ray_init_kwargs = check_kwargs("ray_init_kwargs", ray_init_kwargs) or {}
 
     @property
     def num_workers(self) -> int | None:

@@ -11,7 +11,7 @@ the transport of these signals.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Any, TypedDict
 
 import cloudpickle
@@ -119,6 +119,21 @@ def env_config(
             f"Unexpected keyword argument(s) {', '.join(unknown)}: the env arguments of a worker are "
             f"{', '.join(WorkerEnvArgs.__annotations__)} (those of SB3's make_vec_env)."
         )
+    for name in ("env_kwargs", "wrapper_kwargs", "vec_env_kwargs", "monitor_kwargs"):
+        check_kwargs(name, env_args.get(name))
+    wrapper_class = env_args.get("wrapper_class")
+    if wrapper_class is not None and not callable(wrapper_class):
+        raise TypeError(
+            f"wrapper_class={wrapper_class!r}: it must be a gym.Wrapper class, or a function taking the env and "
+            "returning the wrapped env (or None for no wrapper)."
+        )
+    vec_env_cls = env_args.get("vec_env_cls")
+    if vec_env_cls is not None and not (isinstance(vec_env_cls, type) and issubclass(vec_env_cls, VecEnv)):
+        what = "the VecEnv class itself, not its name" if isinstance(vec_env_cls, str) else "a VecEnv class"
+        raise TypeError(
+            f"vec_env_cls={vec_env_cls!r}: pass {what} (from stable_baselines3.common.vec_env import DummyVecEnv, "
+            "then vec_env_cls=DummyVecEnv), or None for DummyVecEnv."
+        )
     config: dict[str, Any] = dict(env=env, n_envs=envs_per_worker, **env_args)
     config["vec_env_cls"] = config.get("vec_env_cls") or DummyVecEnv
     for name, value in config.items():  # every worker gets a copy: refused here, not at the first learn()
@@ -131,6 +146,24 @@ def env_config(
                 "factory, or pass a registered env id."
             ) from error
     return config
+
+
+def check_kwargs(name: str, value: Any) -> dict[str, Any] | None:
+    """
+    :param name: Argument name, for the message.
+    :param value: Keyword arguments for a function (``None`` for none).
+    :return: ``value`` as a dict, or ``None``.
+    :raises TypeError: Naming ``name`` when ``value`` is not a mapping with string keys (a list of pairs, a
+        string), which would fail only where the keywords are passed (in a worker, at the first evaluation).
+    """
+    if value is None:
+        return None
+    if not isinstance(value, Mapping):
+        raise TypeError(f"{name}={value!r}: it must be a dict of keyword arguments, such as dict(key=value), or None.")
+    wrong = [key for key in value if not isinstance(key, str)]
+    if wrong:
+        raise TypeError(f"{name}={value!r}: its keys must be argument names (strings), not {wrong[0]!r}.")
+    return dict(value)
 
 
 def with_sb3_wrappers(env: VecEnv) -> VecEnv:
