@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import time
 from typing import Any
 
 import numpy as np
@@ -79,3 +80,22 @@ def make_ars(env: Any, **kwargs: Any) -> ARS:
 def learn_generations(model: ARS, n: int, callback: BaseCallback | None = None) -> None:
     for i in range(n):
         model.learn(1, callback=callback, reset_num_timesteps=i == 0)
+
+
+def gone(pid: int) -> bool:
+    """:return: Whether process ``pid`` has ended (a zombie waiting for its parent to read its status counts)."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] == "Z"
+    except FileNotFoundError:
+        return True
+
+
+def wait_gone(pids: list[int], timeout: float = 30.0) -> bool:
+    """:return: Whether every process of ``pids`` ended within ``timeout`` seconds."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if all(gone(pid) for pid in pids):
+            return True
+        time.sleep(0.1)
+    return False

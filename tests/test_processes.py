@@ -26,7 +26,7 @@ import pytest
 from envs import ToyEnv
 from gymnasium.wrappers import ClipReward, TransformReward
 from sb3_contrib.common.wrappers import TimeFeatureWrapper
-from sharded_helpers import toy_policy, toy_population
+from sharded_helpers import gone, toy_policy, toy_population, wait_gone
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.monitor import load_results
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNormalize
@@ -38,24 +38,6 @@ from sb3_es.evaluation.processes import ProcessEvaluator, usable_cpus
 from sb3_es.evaluation.worker import DEFAULT_ENVS_PER_WORKER
 
 REPO = Path(__file__).resolve().parent.parent
-
-
-def gone(pid: int) -> bool:
-    """:return: Whether process ``pid`` has ended (a zombie waiting for its parent to read its status counts)."""
-    try:
-        with open(f"/proc/{pid}/stat") as f:
-            return f.read().rsplit(")", 1)[1].split()[0] == "Z"
-    except FileNotFoundError:
-        return True
-
-
-def wait_gone(pids: list[int], timeout: float = 30.0) -> bool:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if all(gone(pid) for pid in pids):
-            return True
-        time.sleep(0.1)
-    return False
 
 
 def test_evaluator_processes_from_env_id() -> None:

@@ -23,7 +23,7 @@ import numpy as np
 import pytest
 import ray
 from envs import StepCounter, ToyEnv
-from sharded_helpers import ENVS_PER_WORKER, learn_generations, make_ars, toy_policy, toy_population
+from sharded_helpers import ENVS_PER_WORKER, learn_generations, make_ars, toy_policy, toy_population, wait_gone
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.vec_env import SubprocVecEnv
 
@@ -325,15 +325,6 @@ def test_bad_arguments() -> None:
         RayEvaluator(ToyEnv, max_worker_restarts=1)  # type: ignore[call-arg]
 
 
-def process_gone(pid: int) -> bool:
-    """:return: Whether process ``pid`` has ended (a zombie counts)."""
-    try:
-        with open(f"/proc/{pid}/stat") as f:
-            return f.read().rsplit(")", 1)[1].split()[0] == "Z"
-    except FileNotFoundError:
-        return True
-
-
 @pytest.mark.timeout(300, method="thread")
 def test_subproc_vec_env_in_an_actor() -> None:
     # Unlike a worker process, an actor is no daemon: its envs may run in processes of their own, which end with it.
@@ -349,10 +340,7 @@ def test_subproc_vec_env_in_an_actor() -> None:
         np.testing.assert_allclose(result.returns, local.returns, rtol=1e-6)
         [pids] = evaluator.call_workers(lambda venv: [process.pid for process in venv.processes])
     assert len(pids) == 2
-    deadline = time.monotonic() + 60  # the env processes see their pipes close when the actor is killed
-    while not all(map(process_gone, pids)) and time.monotonic() < deadline:
-        time.sleep(0.1)
-    assert all(map(process_gone, pids))
+    assert wait_gone(pids, timeout=60)  # the env processes see their pipes close when the actor is killed
 
 
 #: The ray.init arguments of the ray_cluster fixture (conftest.py): a test that restarts Ray restarts it so.
