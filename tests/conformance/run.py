@@ -93,6 +93,7 @@ def main() -> int:
         paths = (str(HERE.parents[1]), str(deps) if deps else None, os.environ.get("PYTHONPATH"))
         path = os.pathsep.join(p for p in paths if p)
         env = {**os.environ, "PYTHONPATH": path, "SB3ES_CONFORMANCE_DESELECT": str(HERE / "deselect.txt")}
+        env["SB3_LOGDIR"] = str(folder / "sb3_logs")  # SB3's default log folders, else one $TMPDIR/SB3-* per learn()
         command = [
             sys.executable,
             "-m",
