@@ -205,9 +205,7 @@ class PopulationAlgorithm(StrategyAlgorithm):
         super().set_env(env, force_reset)  # checks that the workers can rebuild the env, before anything changes
         if isinstance(self.evaluator, str) and self.evaluator != "local":
             self._env_id = None
-            if self._evaluator is not None:
-                self._evaluator.close()
-                self._evaluator = None
+            self.close()
 
     def close(self) -> None:
         """

@@ -98,16 +98,16 @@ class StrategyAlgorithm(ESBaseAlgorithm):
         assert isinstance(policy, FlatPolicy)  # checked above
         self.policy = policy.to(self.device)
         if self.strategy is None:  # a loaded model brings its strategy (and its random state)
-            strategy_seed, env_seed = stream_seeds(self.seed)
             center = self.policy.parameters_to_vector()
             if self.zero_policy:
                 center[self.policy.output_layer_slice()] = 0.0
-            self.strategy = self._make_strategy(center, strategy_seed)
-            self._env_rng = np.random.default_rng(env_seed)
+            self.strategy = self._make_strategy(center, stream_seeds(self.seed)[0])
         elif self.strategy.restored_legacy_state:
             self._upgrade_legacy_strategy()
             self.strategy.state_version = self.strategy.STATE_VERSION
-        if self._env_rng is None:  # left out of a save (save(exclude=["_env_rng"])): a new stream, as SB3's _last_obs
+        # A new model's stream of evaluation seeds; a loaded one brings its own, unless it was left out of the save
+        # (save(exclude=["_env_rng"])): then a new one, as SB3 does without _last_obs.
+        if self._env_rng is None:
             self._env_rng = np.random.default_rng(stream_seeds(self.seed)[1])
         self.policy.load_from_vector(self.strategy.center)
         self._warn_double_normalization(self.env)

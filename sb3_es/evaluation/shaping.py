@@ -62,7 +62,7 @@ class RewardShaping:
                 values = list(reward_clip)
             finite = all(_finite_number(v) for v in values)
             if len(values) != 2 or not finite or values[0] >= values[1]:
-                hint = next((yaml_string_hint(v) for v in values if yaml_string_hint(v)), "")
+                hint = next(filter(None, map(yaml_string_hint, values)), "")
                 raise ValueError(
                     f"reward_clip={reward_clip!r}: give two finite numbers (low, high) with low < high, e.g. "
                     f"reward_clip=(-1, 1), or None for no clipping{hint}."

@@ -50,8 +50,8 @@ class ARSStrategy(Strategy):
         self.noise_table = noise_table
         self.n_delta = n_delta
         self.n_top = n_top
-        self.delta_std = check_positive_number("delta_std", delta_std)
-        self.learning_rate = check_non_negative("learning_rate", learning_rate)
+        self.delta_std = delta_std
+        self.learning_rate = learning_rate
         self.check_settings()
         self._deltas: np.ndarray | None = None
 
@@ -60,8 +60,8 @@ class ARSStrategy(Strategy):
         self.n_top = check_count("n_top", self.n_top)
         if not 1 <= self.n_top <= self.n_delta:
             raise ValueError(f"n_top={self.n_top!r} must be between 1 and n_delta={self.n_delta}.")
-        check_positive_number("delta_std", self.delta_std)
-        check_non_negative("learning_rate", self.learning_rate)  # a learning-rate schedule may end at 0
+        self.delta_std = check_positive_number("delta_std", self.delta_std)
+        self.learning_rate = check_non_negative("learning_rate", self.learning_rate)  # a schedule may end at 0
         self._check_noise_table(self.n_delta)
 
     @property

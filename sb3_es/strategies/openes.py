@@ -89,7 +89,7 @@ class OpenESStrategy(GradientStrategy):
         super().__init__(center, learning_rate, optimizer, momentum, betas, max_speed, seed)
         self.noise_table = noise_table
         self.population_size = population_size
-        self.sigma = check_positive_number("sigma", sigma)
+        self.sigma = sigma
         self.antithetic = antithetic
         self.fitness_shaping = fitness_shaping
         self.weight_decay = weight_decay
@@ -107,7 +107,7 @@ class OpenESStrategy(GradientStrategy):
             raise ValueError(
                 f"population_size={population_size}: it must be at least 2, and even with antithetic sampling."
             )
-        check_positive_number("sigma", self.sigma)
+        self.sigma = check_positive_number("sigma", self.sigma)
         check_non_negative("learning_rate", self.learning_rate)  # a learning-rate schedule may end at 0
         for name, value in (
             ("weight_decay", self.weight_decay),

@@ -72,7 +72,7 @@ class SimpleESStrategy(Strategy):
         super().__init__(center, seed)
         self.noise_table = noise_table
         self.population_size = population_size
-        self.sigma = check_positive_number("sigma", sigma)
+        self.sigma = sigma
         self.n_elite = n_elite
         self.weights: EliteWeights = weights
         self.check_settings()
@@ -82,7 +82,7 @@ class SimpleESStrategy(Strategy):
         self.n_elite = check_count("n_elite", self.n_elite)
         if self.n_elite > self.population_size:
             raise ValueError(f"n_elite={self.n_elite} must be between 1 and population_size={self.population_size}.")
-        check_positive_number("sigma", self.sigma)
+        self.sigma = check_positive_number("sigma", self.sigma)
         self.elite_weights = elite_weights(self.n_elite, self.weights)  # checks the name; follows a new n_elite
         self._check_noise_table(self.population_size)
 
