@@ -483,6 +483,26 @@ def test_learning_rate_schedule_going_negative_during_training(algorithm, kwargs
         assert th.all(th.isfinite(param))
 
 
+@pytest.mark.parametrize(
+    ("algorithm", "kwargs"),
+    [
+        (ARS, dict(policy="LinearPolicy", n_delta=1)),
+        (OpenES, dict(policy="LinearPolicy", population_size=2)),
+        (REINFORCE, dict(policy="MlpPolicy", n_episodes=1)),
+    ],
+)
+@pytest.mark.parametrize("bad", [None, "0.01"], ids=["None", "a-string"])
+def test_learning_rate_schedule_giving_a_non_number_during_training(algorithm, kwargs, bad: Any) -> None:
+    """It gave ``float()``'s TypeError without the schedule's name, or (a string) was taken as a number."""
+    steps = 400 if algorithm is not REINFORCE else 200
+    model = algorithm(
+        env="Pendulum-v1", learning_rate=lambda progress: 0.01 if progress > 0.6 else bad, seed=0, **kwargs
+    )
+    match = rf"learning_rate schedule gave {bad!r} at progress_remaining=0.5: it must return a number"
+    with pytest.raises(TypeError, match=match):
+        model.learn(4 * steps)
+
+
 def test_learning_rate_schedule_ending_at_zero_is_accepted() -> None:
     model = REINFORCE("MlpPolicy", "Pendulum-v1", n_episodes=1, learning_rate=lambda progress: 0.01 * progress, seed=0)
     model.learn(600)  # the last update sees progress 0 (it ends at 600 steps): learning rate 0

@@ -25,9 +25,10 @@ def check_positive(name: str, value: float | Schedule) -> None:
         raise ValueError(f"{name}={start}: it must be a positive number (got {value!r}).")
 
 
-def check_scheduled_value(name: str, value: float, progress_remaining: float, allow_zero: bool = False) -> None:
+def check_scheduled_value(name: str, value: Any, progress_remaining: float, allow_zero: bool = False) -> float:
     """
-    Raise a clear error when a schedule gives a non-positive (or negative) or non-finite value during training.
+    Raise a clear error when a schedule gives a non-number, or a non-positive (or negative) or non-finite value, during
+    training.
 
     :param name: Hyperparameter name, for the message.
     :param value: The schedule's value now.
@@ -35,7 +36,14 @@ def check_scheduled_value(name: str, value: float, progress_remaining: float, al
     :param allow_zero: Accept 0: a step size (learning rate) that ends at 0 with the training adds nothing to the
         step (an optimizer with momentum coasts on its velocity),
         whereas a noise scale (``sigma``, ``delta_std``) of 0 leaves nothing to explore.
+    :return: ``value`` as a float.
     """
+    if not isinstance(value, numbers.Real) or isinstance(value, bool):
+        raise TypeError(
+            f"The {name} schedule gave {value!r} at progress_remaining={progress_remaining:.4g}: it must return a "
+            "number (a float) for every progress_remaining from 1 to 0."
+        )
+    value = float(value)
     if not (np.isfinite(value) and (value >= 0 if allow_zero else value > 0)):
         bound, floor = (">= 0", "0.0") if allow_zero else ("> 0", "1e-6")
         reason = "a negative step size steps downhill" if allow_zero else f"{name} must stay positive"
@@ -44,6 +52,7 @@ def check_scheduled_value(name: str, value: float, progress_remaining: float, al
             f"{bound} for all of training ({reason}). Fix the schedule, e.g. clip it: "
             f"lambda progress: max({floor}, schedule(progress))."
         )
+    return value
 
 
 def check_seed(seed: int | None) -> int | None:

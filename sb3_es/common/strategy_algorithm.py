@@ -196,9 +196,8 @@ class StrategyAlgorithm(ESBaseAlgorithm):
         for name in self.scheduled_hyperparameters:
             schedule = getattr(self, name)
             if callable(schedule):
-                value = float(schedule(progress))
                 # A step size may reach 0 (no update); a noise scale (sigma, delta_std) must stay positive.
-                check_scheduled_value(name, value, progress, allow_zero=name == "learning_rate")
+                value = check_scheduled_value(name, schedule(progress), progress, allow_zero=name == "learning_rate")
                 setattr(self.strategy, name, value)
         return self.strategy.ask()
 

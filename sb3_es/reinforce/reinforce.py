@@ -259,7 +259,9 @@ class REINFORCE(ESBaseAlgorithm):
             # that ends at 0 gives 0, not a negative step).
             self._update_current_progress_remaining(min(self.num_timesteps, total_timesteps), total_timesteps)
             progress = self._current_progress_remaining
-            check_scheduled_value("learning_rate", self.lr_schedule(progress), progress, allow_zero=True)
+            # The given schedule, not SB3's lr_schedule (which converts its value with float(): "1e-3" passes).
+            value = self.learning_rate(progress) if callable(self.learning_rate) else self.learning_rate
+            check_scheduled_value("learning_rate", value, progress, allow_zero=True)
             self.train(batch)
             if log_interval is not None and iteration % log_interval == 0:
                 self.dump_logs(iteration)
