@@ -171,9 +171,13 @@ def test_new_evaluator_makes_room_or_names_the_cause(toy_ray: RayEvaluator, capl
         assert result.returns.shape == (4, 1)
     assert any("idle Ray actor" in record.getMessage() for record in caplog.records)
     assert toy_ray._actors == []
-    # More actors than the cluster can ever place: a clear error after start_timeout, not a hang.
+    # More actors than the cluster can ever place: a warning at once, a clear error after start_timeout, not a hang.
     too_many = RayEvaluator(ToyEnv, num_workers=3, start_timeout=5)
-    with pytest.raises(RuntimeError, match=r"could not start \d of 3 actor\(s\) within start_timeout=5 s"):
+    warning = r"num_workers=3 Ray actors of num_cpus_per_worker=1 CPU\(s\) need 3 CPUs and the Ray cluster has 2 in"
+    with (
+        pytest.warns(UserWarning, match=warning),
+        pytest.raises(RuntimeError, match=r"could not start \d of 3 actor\(s\) within start_timeout=5 s"),
+    ):
         too_many.evaluate(policy, population, population[0], 1, seed=0)
     assert too_many._actors == []
     # toy_ray starts again when used.

@@ -14,6 +14,7 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 import pytest
 from algorithms import progress_bar_after_learn
@@ -380,6 +381,15 @@ def test_an_env_error_is_raised_at_once(host: str, tmp_path: Path) -> None:
             assert workers(evaluator) == []
     finally:
         Path(release).touch()
+
+
+def test_an_env_that_cannot_be_built_raises_its_own_error(host: str) -> None:
+    """An unknown env id gives the worker's gymnasium error with the hint for envs registered by a script (on Ray it
+    was an ActorDiedError: an error raised in an actor's constructor loses its type)."""
+    evaluator = make_evaluator(host, "NoSuchEnv-v0", num_workers=1)
+    with pytest.raises(gym.error.NameNotFound, match=r"NoSuchEnv.*\(in a worker process\)\. An env registered"):
+        evaluator.start()
+    assert workers(evaluator) == []
 
 
 def test_a_replacements_start_is_not_counted_in_generation_timeout(

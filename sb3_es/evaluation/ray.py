@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import warnings
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -137,6 +138,15 @@ class RayActorPool(WorkerPool):
         else:
             self.size = self.requested
             ray_session.make_room(self.size * per_actor, self)
+            total = ray_session.total_cpus()
+            if self.size * per_actor > total + 1e-6:
+                warnings.warn(
+                    f"num_workers={self.size} Ray actors of num_cpus_per_worker={per_actor:g} CPU(s) need "
+                    f"{self.size * per_actor:g} CPUs and the Ray cluster has {total:g} in all: they start only if "
+                    f"the cluster grows, else the first evaluation fails after start_timeout={self.start_timeout:g} s. "
+                    f"Ask for less (num_workers=, or num_cpus_per_worker={total / self.size:g}).",
+                    stacklevel=2,
+                )
         self.actors = [self._new_actor() for _ in range(self.size)]
         self._tables = [set() for _ in range(self.size)]
         try:

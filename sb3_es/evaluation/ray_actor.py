@@ -75,8 +75,13 @@ class RayWorker:
         import torch as th
 
         th.set_num_threads(1)  # actors share the machine's cores
-        with _carrying_exits():
-            self.runner = ShareRunner(config)
+        # An error here is raised by ready(): raised by __init__, Ray reports an ActorDiedError (the type is lost).
+        self._start_error: Exception | None = None
+        try:
+            with _carrying_exits():
+                self.runner = ShareRunner(config)
+        except Exception as e:
+            self._start_error = e
         self._generations: dict[int, _Generation] = {}
         # The latest generation token whose evaluation has returned (the driver's tokens grow): signals for it or an
         # earlier one come too late and are answered at once.
@@ -114,7 +119,12 @@ class RayWorker:
             generation.stop.set()
 
     def ready(self) -> int:
-        """:return: Number of env slots (used to wait for the actor and check it started)."""
+        """
+        :return: Number of env slots (used to wait for the actor and check it started).
+        :raises Exception: The error that building the env raised (e.g. ``gymnasium.error.NameNotFound``).
+        """
+        if self._start_error is not None:
+            raise self._start_error
         return self.runner.env.num_envs
 
     def set_noise_table(self, key: tuple[int, int], noise: np.ndarray) -> None:
