@@ -33,7 +33,7 @@ test: venv
 	$(MAKE) lint
 	$(MAKE) typecheck
 	$(MAKE) docs
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q --durations=15  # the slowest tests: the suite should stay under about 10 minutes
 
 lint: venv
 	$(BIN)/ruff check $(LINT_PATHS)
