@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 from stable_baselines3.common.type_aliases import Schedule
 
-from sb3_es.strategies.base import check_number
+from sb3_es.strategies.base import check_number, is_number
 
 
 def check_positive(name: str, value: float | Schedule) -> None:
@@ -38,7 +38,7 @@ def check_scheduled_value(name: str, value: Any, progress_remaining: float, allo
         whereas a noise scale (``sigma``, ``delta_std``) of 0 leaves nothing to explore.
     :return: ``value`` as a float.
     """
-    if not isinstance(value, numbers.Real) or isinstance(value, bool):
+    if not is_number(value):
         raise TypeError(
             f"The {name} schedule gave {value!r} at progress_remaining={progress_remaining:.4g}: it must return a "
             "number (a float) for every progress_remaining from 1 to 0."

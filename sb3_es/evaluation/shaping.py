@@ -3,19 +3,18 @@
 from __future__ import annotations
 
 import math
-import numbers
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from sb3_es.strategies.base import yaml_string_hint
+from sb3_es.strategies.base import is_number, yaml_string_hint
 
 
 def _finite_number(value: Any) -> bool:
     """:return: Whether ``value`` is a finite real number (not a bool, not a string)."""
-    return isinstance(value, numbers.Real) and not isinstance(value, bool) and math.isfinite(value)
+    return is_number(value) and math.isfinite(value)
 
 
 @dataclass(frozen=True)

@@ -177,6 +177,11 @@ def mirrored_groups(n_candidates: int) -> np.ndarray:
     return np.tile(np.arange(n_candidates // 2, dtype=np.int64), 2)
 
 
+def is_number(value: Any) -> bool:
+    """:return: Whether ``value`` is a real number (a bool is not, nor is a string that reads as one)."""
+    return isinstance(value, numbers.Real) and not isinstance(value, bool)
+
+
 def check_count(name: str, value: Any, minimum: int = 1) -> int:
     """
     :param name: Hyperparameter name, for the message.
@@ -185,7 +190,7 @@ def check_count(name: str, value: Any, minimum: int = 1) -> int:
     :return: The count as an ``int``.
     :raises ValueError: Naming ``name`` when ``value`` is not a whole number of at least ``minimum``.
     """
-    number = float(value) if isinstance(value, numbers.Real) and not isinstance(value, bool) else math.nan
+    number = float(value) if is_number(value) else math.nan
     if not number.is_integer():
         raise ValueError(f"{name}={value!r}: it must be a whole number (at least {minimum}).")
     if number < minimum:
@@ -201,7 +206,7 @@ def check_number(name: str, value: Any) -> float:
     :raises TypeError: Naming ``name`` when ``value`` is not a number: a string (as YAML reads ``1e-2``), or a
         schedule given where none is taken.
     """
-    if isinstance(value, numbers.Real) and not isinstance(value, bool):
+    if is_number(value):
         return float(value)
     hint = yaml_string_hint(value) or (" (a string)" if isinstance(value, str) else "")
     if callable(value):
