@@ -133,6 +133,8 @@ def main(argv: Sequence[str] | None = None) -> None:
         options = parser.parse_args(args[1:])
         if options.n_timesteps < 1:
             parser.error(f"-n {options.n_timesteps}: give a positive number of env steps.")
+        if not 0 <= options.seed < 2**32:  # as the algorithms' seed
+            parser.error(f"--seed {options.seed}: give an integer in [0, 2**32 - 1].")
         quickstart(options.n_timesteps, options.log_folder, options.seed)
         return
     if args[:1] == ["train"]:  # the former command's flags (enjoy and the others take --n-envs, as in rl-zoo)

@@ -87,6 +87,14 @@ def test_quickstart_refuses_a_budget_below_one(capsys: pytest.CaptureFixture[str
     assert "-n -5: give a positive number of env steps" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("seed", ["-1", "4294967296"])
+def test_quickstart_refuses_a_seed_out_of_range(seed: str, capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as stop:
+        main(["quickstart", "-n", "100", "--seed", seed])
+    assert stop.value.code == 2  # a usage error, before any env is built
+    assert f"--seed {seed}: give an integer in [0, 2**32 - 1]" in capsys.readouterr().err
+
+
 def test_abbreviated_and_attached_options_are_read_as_rl_zoo_reads_them(tmp_path: Path) -> None:
     from sb3_es.zoo.commands import prepare_args
 

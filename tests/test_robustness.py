@@ -10,7 +10,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import torch as th
-from algorithms import ALGORITHMS, ALGOS, POPULATION_ALGORITHMS, Algo
+from algorithms import ALGORITHMS, ALGOS, POPULATION_ALGORITHMS, Algo, GenerationRecorder, policy_vector
 from envs import NEVER_ENDING_ID, DiscreteMatchEnv, NaNObsWrapper, NeverEndingEnv, SuccessInfoWrapper, ToyEnv
 from gymnasium import spaces
 from gymnasium.wrappers import TimeLimit
@@ -323,6 +323,20 @@ def test_learn_stops_after_the_generation_in_flight(algo: Algo, capsys: pytest.C
     assert float(env.obs_rms.count) == log.ends[-1][1]
     if algo.population:
         assert model._n_updates == len(log.starts)  # type: ignore[attr-defined]
+
+
+@pytest.mark.parametrize("algo", ALGORITHMS)
+def test_learn_zero_steps_runs_nothing_and_returns(algo: Algo) -> None:
+    model = make_model(algo, make_vec_env(ToyEnv, n_envs=2))
+    for trained in (False, True):  # a new model, then one that has trained (reset_num_timesteps=True)
+        before = policy_vector(model)
+        recorder = GenerationRecorder()
+        assert model.learn(0, callback=recorder) is model  # as PPO's learn(0)
+        assert model.num_timesteps == 0 and recorder.rollout_starts == []
+        assert recorder.training_started == recorder.training_ended == 1  # a progress bar or a callback is closed
+        np.testing.assert_array_equal(policy_vector(model), before)
+        if not trained:
+            model.learn(50)
 
 
 # ---------------------------------------------------------------------------- callback locals

@@ -277,7 +277,8 @@ class PopulationAlgorithm(StrategyAlgorithm):
             iteration += 1
             if log_interval is not None and iteration % log_interval == 0:
                 self.dump_logs(iteration)
-        self._update_current_progress_remaining(self.num_timesteps, total_timesteps)  # as PPO's: 0 (or less) at the end
+        if total_timesteps > 0:  # as PPO's: 0 (or less) at the end; learn(0) runs nothing and returns, as PPO's
+            self._update_current_progress_remaining(self.num_timesteps, total_timesteps)
         callback.on_training_end()
         return self
 
