@@ -19,6 +19,7 @@ from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.evaluation import evaluate_policy
 
 from sb3_es import ARS
+from sb3_es.common.checks import check_seed
 
 #: The quickstart run: ARS-V2 with a linear policy on Swimmer-v5 (MuJoCo ships with the ``mujoco`` wheel),
 #: with the ARS paper's Swimmer settings; seed 959 is one of the paper's seeds.
@@ -133,7 +134,9 @@ def main(argv: Sequence[str] | None = None) -> None:
         options = parser.parse_args(args[1:])
         if options.n_timesteps < 1:
             parser.error(f"-n {options.n_timesteps}: give a positive number of env steps.")
-        if not 0 <= options.seed < 2**32:  # as the algorithms' seed
+        try:
+            check_seed(options.seed)  # the algorithms' own check, as a usage error before any env is built
+        except ValueError:
             parser.error(f"--seed {options.seed}: give an integer in [0, 2**32 - 1].")
         quickstart(options.n_timesteps, options.log_folder, options.seed)
         return
